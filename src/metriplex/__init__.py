@@ -1,0 +1,49 @@
+"""metriplex: learn thermodynamically consistent (GENERIC) dynamics from trajectories.
+
+.. math:: \\dot x = L(x)\\nabla E(x) + M(x)\\nabla S(x),\\quad L\\nabla S = 0,\\ M\\nabla E = 0.
+"""
+
+__version__ = "0.1.0"
+
+from . import structure as structure
+from ._errors import MetriplexError as MetriplexError
+from ._errors import RolloutFailure as RolloutFailure
+from ._errors import TrainingDiverged as TrainingDiverged
+from ._model import GenericModel as GenericModel
+from ._model import Terms as Terms
+from .data import Pairs as Pairs
+from .data import Trajectories as Trajectories
+from .integrate import RK4 as RK4
+from .integrate import AbstractScheme as AbstractScheme
+from .integrate import CrankNicolson as CrankNicolson
+from .integrate import ImplicitMidpoint as ImplicitMidpoint
+from .integrate import Rollout as Rollout
+from .integrate import simulate as simulate
+from .integrate import solve as solve
+from .io import load as load
+from .io import read as read
+from .io import save as save
+from .io import write as write
+from .losses import CrankNicolsonResidual as CrankNicolsonResidual
+from .losses import DegeneracyPenalty as DegeneracyPenalty
+from .losses import FrictionDegeneracy as FrictionDegeneracy
+from .losses import JacobiPenalty as JacobiPenalty
+from .losses import Loss as Loss
+from .losses import MidpointResidual as MidpointResidual
+from .losses import PoissonDegeneracy as PoissonDegeneracy
+from .losses import SchemeResidual as SchemeResidual
+from .structure import CanonicalPoisson as CanonicalPoisson
+from .structure import CholeskyFriction as CholeskyFriction
+from .structure import FeatureMap as FeatureMap
+from .structure import Known as Known
+from .structure import KnownFriction as KnownFriction
+from .structure import KnownPoisson as KnownPoisson
+from .structure import MLPPotential as MLPPotential
+from .structure import Scaling as Scaling
+from .structure import SkewMLPPoisson as SkewMLPPoisson
+from .structure import SumOf as SumOf
+from .structure import ZeroFriction as ZeroFriction
+from .structure import ZeroPoisson as ZeroPoisson
+from .structure import ZeroPotential as ZeroPotential
+from .train import History as History
+from .train import fit as fit

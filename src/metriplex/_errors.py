@@ -1,0 +1,24 @@
+"""The one exception type that the command line turns into a clean message."""
+
+
+class MetriplexError(ValueError):
+    """Bad input or an unrecoverable condition, explained: the rule, the value, the fix."""
+
+
+class RolloutFailure(MetriplexError):
+    """An implicit step did not converge. ``partial`` holds the states computed before it."""
+
+    def __init__(self, message: str, *, partial=None, trajectory: int = 0, time: float = 0.0):
+        super().__init__(message)
+        self.partial = partial
+        self.trajectory = trajectory
+        self.time = time
+
+
+class TrainingDiverged(MetriplexError):
+    """A loss term became non-finite. ``model`` is the best model before it; ``history`` too."""
+
+    def __init__(self, message: str, *, model=None, history=None):
+        super().__init__(message)
+        self.model = model
+        self.history = history

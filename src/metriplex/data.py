@@ -1,0 +1,213 @@
+r"""Trajectory data: the long table of DESIGN.md §2, training pairs, and splits by trajectory.
+
+A :class:`Trajectories` holds one row per observed state: ``trajectory`` (integer id), ``t``
+(time) and ``x`` (the ``n`` state variables). Rows of one trajectory are ordered by strictly
+increasing ``t``; spacing may vary and trajectories may have different lengths (ragged).
+Training pairs are consecutive rows of the same trajectory, each with its own ``dt``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Iterator, NamedTuple, Sequence
+
+import numpy as np
+
+from ._errors import MetriplexError
+
+
+class Pairs(NamedTuple):
+    """Training pairs :math:`(x_n, x_{n+1}, \\Delta t_n)` as arrays of equal length."""
+
+    x0: np.ndarray
+    x1: np.ndarray
+    dt: np.ndarray
+
+    def __len__(self) -> int:  # type: ignore[override]
+        return int(self.x0.shape[0])
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Trajectories:
+    """Observed trajectories in the long-table layout.
+
+    ```python
+    data = Trajectories.from_list([(t0, x0), (t1, x1)], names=["q", "p"])
+    train, valid = data.split(0.2, seed=0)
+    pairs = train.pairs()
+    ```
+    """
+
+    trajectory: np.ndarray
+    t: np.ndarray
+    x: np.ndarray
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        traj = np.asarray(self.trajectory)
+        t = np.asarray(self.t, dtype=np.float64)
+        x = np.asarray(self.x)
+        if x.ndim == 1:
+            x = x[:, None]
+        if x.dtype.kind not in "fiu":
+            raise MetriplexError(f"state values must be numbers; got dtype {x.dtype}.")
+        x = x.astype(np.float64)
+        if traj.ndim != 1 or t.ndim != 1 or x.ndim != 2:
+            raise MetriplexError(
+                "trajectory and t must be 1-D and x 2-D (rows x variables); got shapes "
+                f"{traj.shape}, {t.shape}, {x.shape}."
+            )
+        if not (len(traj) == len(t) == len(x)):
+            raise MetriplexError(
+                f"trajectory, t and x must have one entry per row; got {len(traj)}, {len(t)} "
+                f"and {len(x)} rows."
+            )
+        if len(t) == 0:
+            raise MetriplexError("the data hold no rows; a file with at least one trajectory of "
+                                 "two or more samples is needed.")
+        if traj.dtype.kind == "f":
+            if not np.all(np.isfinite(traj)) or np.any(traj != np.round(traj)):
+                raise MetriplexError(
+                    "trajectory ids must be integers; got non-integer values such as "
+                    f"{traj[np.flatnonzero(traj != np.round(traj))[:1]]}."
+                )
+        if traj.dtype.kind not in "iuf":
+            raise MetriplexError(f"trajectory ids must be integers; got dtype {traj.dtype}.")
+        traj = traj.astype(np.int64)
+        names = tuple(str(s) for s in self.names) or tuple(f"x{i}" for i in range(x.shape[1]))
+        if len(names) != x.shape[1]:
+            raise MetriplexError(
+                f"got {len(names)} variable names for {x.shape[1]} state columns; give one name "
+                "per column."
+            )
+        if len(set(names)) != len(names):
+            raise MetriplexError(f"variable names must be unique; got {list(names)}.")
+        for arr, what in ((t, "t"), (x, "x")):
+            bad = ~np.isfinite(arr)
+            if np.any(bad):
+                row = int(np.flatnonzero(bad.reshape(len(arr), -1).any(axis=1))[0])
+                raise MetriplexError(
+                    f"data must be finite; {what} has NaN or inf at row {row} (trajectory "
+                    f"{traj[row]}, t={t[row]}). Remove or interpolate those samples."
+                )
+        # Stable sort by trajectory id keeps rows of a trajectory in file order.
+        order = np.argsort(traj, kind="stable")
+        traj, t, x = traj[order], t[order], x[order]
+        ids, starts, counts = np.unique(traj, return_index=True, return_counts=True)
+        for i, s, c in zip(ids, starts, counts):
+            if c < 2:
+                raise MetriplexError(
+                    f"every trajectory needs at least two samples to form a training pair; "
+                    f"trajectory {i} has {c}. Drop it or merge it with its neighbour."
+                )
+            dt = np.diff(t[s : s + c])
+            if np.any(dt <= 0):
+                k = int(np.flatnonzero(dt <= 0)[0])
+                raise MetriplexError(
+                    f"`t` must be strictly increasing within each trajectory; trajectory {i} "
+                    f"has t[{k + 1}]={t[s + k + 1]!r} <= t[{k}]={t[s + k]!r}. Sort the samples "
+                    "by time, drop duplicates, or split the trajectory."
+                )
+        object.__setattr__(self, "trajectory", traj)
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "x", x)
+        object.__setattr__(self, "names", names)
+
+    # -- construction -------------------------------------------------------------------------
+    @classmethod
+    def from_list(
+        cls, trajectories: Sequence[tuple[np.ndarray, np.ndarray]], names: Sequence[str] = ()
+    ) -> "Trajectories":
+        """From a list of ``(t, x)`` with ``t`` of shape ``(T_k,)`` and ``x`` of ``(T_k, n)``."""
+        if len(trajectories) == 0:
+            raise MetriplexError("no trajectories given; pass at least one (t, x) pair.")
+        ids, ts, xs = [], [], []
+        for k, (t, x) in enumerate(trajectories):
+            t = np.asarray(t, dtype=np.float64).reshape(-1)
+            x = np.asarray(x, dtype=np.float64)
+            x = x.reshape(len(t), -1)
+            ids.append(np.full(len(t), k))
+            ts.append(t)
+            xs.append(x)
+        return cls(np.concatenate(ids), np.concatenate(ts), np.concatenate(xs), tuple(names))
+
+    @classmethod
+    def from_arrays(cls, ts: np.ndarray, xs: np.ndarray, names: Sequence[str] = ()):
+        """From a shared grid ``ts`` (T,) or per-trajectory grids (K, T) and ``xs`` (K, T, n)."""
+        xs = np.asarray(xs)
+        ts = np.broadcast_to(np.asarray(ts, dtype=np.float64), xs.shape[:2])
+        return cls.from_list(list(zip(ts, xs)), names)
+
+    # -- views ----------------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return int(self.x.shape[1])
+
+    @property
+    def ids(self) -> np.ndarray:
+        return np.unique(self.trajectory)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+        for i in self.ids:
+            m = self.trajectory == i
+            yield self.t[m], self.x[m]
+
+    def lengths(self) -> np.ndarray:
+        return np.unique(self.trajectory, return_counts=True)[1]
+
+    def select(self, ids: Sequence[int]) -> "Trajectories":
+        m = np.isin(self.trajectory, np.asarray(ids))
+        return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
+
+    def pairs(self) -> Pairs:
+        """Consecutive rows of the same trajectory, each with its own ``dt``."""
+        same = self.trajectory[1:] == self.trajectory[:-1]
+        return Pairs(self.x[:-1][same], self.x[1:][same], np.diff(self.t)[same])
+
+    def padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(ts, xs, lengths)`` padded to the longest trajectory by repeating the last row.
+
+        Repeated times give zero steps, which every scheme maps to the same state, so a batched
+        rollout on the padded grid equals the rollouts of the ragged trajectories.
+        """
+        lengths = self.lengths()
+        T = int(lengths.max())
+        ts = np.empty((len(lengths), T))
+        xs = np.empty((len(lengths), T, self.n))
+        for k, (t, x) in enumerate(self):
+            ts[k, : len(t)], ts[k, len(t) :] = t, t[-1]
+            xs[k, : len(t)], xs[k, len(t) :] = x, x[-1]
+        return ts, xs, lengths
+
+    def split(self, fraction: float, *, seed: int = 0) -> tuple["Trajectories", "Trajectories | None"]:
+        """Split by trajectory into ``(train, validation)``; no pair is shared between them.
+
+        With a single trajectory, its last ``fraction`` of samples becomes the validation part.
+        ``fraction == 0`` gives ``(self, None)``.
+        """
+        if not 0.0 <= fraction < 1.0:
+            raise MetriplexError(
+                f"the validation fraction must lie in [0, 1); got {fraction}. Use 0 for none."
+            )
+        if fraction == 0.0:
+            return self, None
+        ids = self.ids
+        if len(ids) == 1:
+            t, x = next(iter(self))
+            cut = int(round(len(t) * (1 - fraction)))
+            if cut < 2 or len(t) - cut < 2:
+                return self, None
+            return (
+                Trajectories.from_list([(t[:cut], x[:cut])], self.names),
+                Trajectories.from_list([(t[cut - 1 :], x[cut - 1 :])], self.names),
+            )
+        rng = np.random.default_rng(seed)
+        perm = rng.permutation(ids)
+        n_val = min(max(1, int(round(len(ids) * fraction))), len(ids) - 1)
+        return self.select(np.sort(perm[n_val:])), self.select(np.sort(perm[:n_val]))
+
+    def with_names(self, names: Sequence[str]) -> "Trajectories":
+        return Trajectories(self.trajectory, self.t, self.x, tuple(names))

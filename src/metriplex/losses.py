@@ -1,0 +1,227 @@
+r"""Training losses on data pairs :math:`(x_n, x_{n+1}, \Delta t_n)`.
+
+Loss terms are small objects that compose with ``+`` and scalar ``*``, as in the seed paper's
+:math:`\mathcal L = w_t\mathcal L_{traj} + w_S\mathcal L_{L\nabla S} + w_E\mathcal L_{M\nabla E}
++ w_J\mathcal L_{Jac}`:
+
+```python
+loss = CrankNicolsonResidual() + 10.0 * DegeneracyPenalty() + 1.0 * JacobiPenalty("exact")
+```
+
+Each term is a mean over the batch of a squared norm. Every term is measured in standardised
+state units: the trainer passes the per-component data scale ``d``, residuals are divided by
+``d`` componentwise and the Jacobi tensor by :math:`d_i d_j d_l`, so variables of very different
+magnitudes weigh alike. One evaluation of :math:`E, S, \nabla E, \nabla S, L, M` at both states
+of a pair is shared by all terms.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+
+from ._errors import MetriplexError
+from ._model import GenericModel, Terms
+from .integrate import AbstractScheme, CrankNicolson, ImplicitMidpoint
+
+
+class Batch(NamedTuple):
+    x0: jax.Array  # (B, n)
+    x1: jax.Array  # (B, n)
+    dt: jax.Array  # (B,)
+    scale: jax.Array  # (n,) per-component data scale
+
+
+class Context(NamedTuple):
+    terms0: Terms  # batched over B
+    terms1: Terms
+
+
+class AbstractLossTerm(eqx.Module):
+    """One named term of the loss; returns the batch mean of a squared norm."""
+
+    name: ClassVar[str] = ""
+
+    @abc.abstractmethod
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context, key) -> jax.Array: ...
+
+    def as_loss(self) -> "Loss":
+        return Loss((self,), (1.0,))
+
+    def __add__(self, other):
+        return self.as_loss() + other
+
+    def __radd__(self, other):
+        return self.as_loss().__radd__(other)
+
+    def __mul__(self, w):
+        return self.as_loss() * w
+
+    __rmul__ = __mul__
+
+
+class Loss(eqx.Module):
+    """A weighted sum of loss terms. ``loss(model, batch, key=k)`` returns ``(total, parts)``."""
+
+    terms: tuple[AbstractLossTerm, ...]
+    weights: tuple[float, ...] = eqx.field(static=True)
+
+    def as_loss(self) -> "Loss":
+        return self
+
+    def __add__(self, other):
+        if isinstance(other, (int, float)) and other == 0:
+            return self
+        other = other.as_loss()
+        return Loss(self.terms + other.terms, self.weights + other.weights)
+
+    def __radd__(self, other):
+        if isinstance(other, (int, float)) and other == 0:
+            return self
+        return NotImplemented
+
+    def __mul__(self, w):
+        if not isinstance(w, (int, float)):
+            return NotImplemented
+        if w < 0:
+            raise MetriplexError(f"loss weights must be >= 0; got {w}.")
+        return Loss(self.terms, tuple(float(w) * v for v in self.weights))
+
+    __rmul__ = __mul__
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(t.name for t in self.terms)
+
+    def __call__(self, model: GenericModel, batch: Batch, *, key=None):
+        terms0 = jax.vmap(model.terms)(batch.x0)
+        terms1 = jax.vmap(model.terms)(batch.x1)
+        ctx = Context(terms0, terms1)
+        keys = jr.split(jr.key(0) if key is None else key, len(self.terms))
+        parts: dict[str, jax.Array] = {}
+        total = jnp.zeros((), batch.x0.dtype)
+        for term, w, k in zip(self.terms, self.weights, keys):
+            value = term(model, batch, ctx, k)
+            parts[term.name] = parts.get(term.name, 0.0) + value
+            total = total + w * value
+        return total, parts
+
+
+def _sq(v, scale):
+    return jnp.mean(jnp.sum((v / scale) ** 2, axis=-1))
+
+
+class SchemeResidual(AbstractLossTerm):
+    r"""The defect of each pair under a time-stepping scheme, e.g. Crank–Nicolson:
+
+    .. math:: r_n = \frac{x_{n+1}-x_n}{\Delta t_n} - \tfrac12\big(f(x_n) + f(x_{n+1})\big).
+
+    It needs no derivative of the data, only the pairs and their own ``dt``.
+    """
+
+    scheme: AbstractScheme
+    name: ClassVar[str] = "residual"
+
+    def __call__(self, model, batch, ctx, key):
+        r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(
+            model, batch.x0, batch.x1, batch.dt, ctx.terms0, ctx.terms1
+        )
+        return _sq(r, batch.scale)
+
+
+def CrankNicolsonResidual() -> SchemeResidual:
+    """The seed paper's trajectory loss: the Crank–Nicolson residual of each pair."""
+    return SchemeResidual(CrankNicolson())
+
+
+def MidpointResidual() -> SchemeResidual:
+    """The implicit-midpoint residual of each pair."""
+    return SchemeResidual(ImplicitMidpoint())
+
+
+class PoissonDegeneracy(AbstractLossTerm):
+    r""":math:`|L\nabla S|^2` at both states of each pair (the seed paper's weight :math:`w_S`)."""
+
+    name: ClassVar[str] = "degeneracy_L"
+
+    def __call__(self, model, batch, ctx, key):
+        v0 = jnp.einsum("bij,bj->bi", ctx.terms0.poisson, ctx.terms0.grad_entropy)
+        v1 = jnp.einsum("bij,bj->bi", ctx.terms1.poisson, ctx.terms1.grad_entropy)
+        return 0.5 * (_sq(v0, batch.scale) + _sq(v1, batch.scale))
+
+
+class FrictionDegeneracy(AbstractLossTerm):
+    r""":math:`|M\nabla E|^2` at both states of each pair (the seed paper's weight :math:`w_E`)."""
+
+    name: ClassVar[str] = "degeneracy_M"
+
+    def __call__(self, model, batch, ctx, key):
+        v0 = jnp.einsum("bij,bj->bi", ctx.terms0.friction, ctx.terms0.grad_energy)
+        v1 = jnp.einsum("bij,bj->bi", ctx.terms1.friction, ctx.terms1.grad_energy)
+        return 0.5 * (_sq(v0, batch.scale) + _sq(v1, batch.scale))
+
+
+def DegeneracyPenalty() -> Loss:
+    r"""Both degeneracy penalties, :math:`|L\nabla S|^2 + |M\nabla E|^2`."""
+    return PoissonDegeneracy() + FrictionDegeneracy()
+
+
+def stochastic_jacobi(model: GenericModel, x, u, v, w):
+    r"""The Jacobi trilinear form :math:`J(u, v, w) = \sum J^{ijl}u_iv_jw_l` from three
+    directional derivatives of :math:`L`:
+
+    .. math:: J(u,v,w) = u^\top (D_{Lw}L)\,v + w^\top (D_{Lv}L)\,u + v^\top (D_{Lu}L)\,w.
+
+    Cost: three forward-mode products, :math:`O(n^2)` per probe instead of the full
+    :math:`n^3` tensor.
+    """
+    L = model.poisson_matrix(x)
+    dirs = jnp.stack([L @ w, L @ v, L @ u])
+    dL = jax.vmap(lambda a: jax.jvp(model.poisson_matrix, (x,), (a,))[1])(dirs)
+    return u @ dL[0] @ v + w @ dL[1] @ u + v @ dL[2] @ w
+
+
+class JacobiPenalty(AbstractLossTerm):
+    r"""The Jacobi-identity penalty :math:`\sum_{ijl}(J^{ijl})^2` at the first state of each pair.
+
+    - ``"exact"``: the full tensor, from the forward-mode Jacobian of :math:`L` (cost
+      :math:`\propto n^3` per sample plus ``n`` tangents of the network);
+    - ``"stochastic"``: Hutchinson-style, :math:`J(u,v,w)^2` with independent standard normal
+      probes, averaged over ``probes`` draws. Since :math:`E[u_iu_{i'}] = \delta_{ii'}` for each
+      probe, :math:`E[J(u,v,w)^2] = \sum (J^{ijl})^2`: an **unbiased** estimate of the exact
+      penalty whose cost grows like :math:`n^2`.
+    """
+
+    estimator: str = eqx.field(static=True, default="exact")
+    probes: int = eqx.field(static=True, default=1)
+    name: ClassVar[str] = "jacobi"
+
+    def __check_init__(self):
+        if self.estimator not in ("exact", "stochastic"):
+            raise MetriplexError(
+                f"JacobiPenalty estimator must be 'exact' or 'stochastic'; got "
+                f"{self.estimator!r}."
+            )
+        if self.probes < 1:
+            raise MetriplexError(f"JacobiPenalty needs probes >= 1; got {self.probes}.")
+
+    def __call__(self, model, batch, ctx, key):
+        x = batch.x0
+        inv = 1.0 / batch.scale
+        if self.estimator == "exact":
+            J = jax.vmap(model.jacobi_tensor)(x)
+            J = J * inv[:, None, None] * inv[None, :, None] * inv[None, None, :]
+            return jnp.mean(jnp.sum(J**2, axis=(1, 2, 3)))
+        B, n = x.shape
+        probes = jr.normal(key, (3, B, self.probes, n), x.dtype) * inv
+        vals = jax.vmap(
+            jax.vmap(lambda xi, u, v, w: stochastic_jacobi(model, xi, u, v, w),
+                     in_axes=(None, 0, 0, 0)),
+        )(x, probes[0], probes[1], probes[2])
+        return jnp.mean(vals**2)

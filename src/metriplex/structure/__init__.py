@@ -1,0 +1,18 @@
+"""GENERIC building blocks: potentials (E, S), Poisson bivectors (L), friction matrices (M)."""
+
+from .friction import AbstractFriction as AbstractFriction
+from .friction import CholeskyFriction as CholeskyFriction
+from .friction import KnownFriction as KnownFriction
+from .friction import ZeroFriction as ZeroFriction
+from .poisson import AbstractPoisson as AbstractPoisson
+from .poisson import CanonicalPoisson as CanonicalPoisson
+from .poisson import KnownPoisson as KnownPoisson
+from .poisson import SkewMLPPoisson as SkewMLPPoisson
+from .poisson import ZeroPoisson as ZeroPoisson
+from .potential import AbstractPotential as AbstractPotential
+from .potential import FeatureMap as FeatureMap
+from .potential import Known as Known
+from .potential import MLPPotential as MLPPotential
+from .potential import SumOf as SumOf
+from .potential import ZeroPotential as ZeroPotential
+from .scaling import Scaling as Scaling

@@ -1,0 +1,136 @@
+"""A small MLP whose hidden layers are shared by potentials, Poisson and friction networks.
+
+The structured outputs (antisymmetric L, lower-triangular B) are assembled by folding a fixed
+linear map into the last layer rather than by index gather/scatter: XLA's CPU backward of
+gathers costs ~30x its forward (see DESIGN.md §6), a folded matmul costs nothing extra.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+
+from .._errors import MetriplexError
+
+ACTIVATIONS = {
+    "softplus": jax.nn.softplus,
+    "tanh": jnp.tanh,
+    "gelu": jax.nn.gelu,
+    "silu": jax.nn.silu,
+}
+
+
+def activation_fn(name: str):
+    if name not in ACTIVATIONS:
+        raise MetriplexError(
+            f"activation must be one of {sorted(ACTIVATIONS)} (all C^inf, as GENERIC needs "
+            f"smooth gradients); got {name!r}."
+        )
+    return ACTIVATIONS[name]
+
+
+class Hidden(eqx.Module):
+    """Hidden layers of an MLP: ``in_size -> width -> ... -> width`` (``depth`` layers)."""
+
+    layers: tuple[eqx.nn.Linear, ...]
+    activation: str = eqx.field(static=True)
+
+    def __init__(self, in_size: int, width: int, depth: int, activation: str, *, key):
+        if width < 1 or depth < 1:
+            raise MetriplexError(
+                f"network width and depth must be >= 1; got width={width}, depth={depth}."
+            )
+        activation_fn(activation)
+        keys = jr.split(key, depth)
+        sizes = [in_size] + [width] * depth
+        self.layers = tuple(
+            eqx.nn.Linear(sizes[i], sizes[i + 1], key=keys[i]) for i in range(depth)
+        )
+        self.activation = activation
+
+    def __call__(self, z):
+        act = activation_fn(self.activation)
+        for layer in self.layers:
+            z = act(layer(z))
+        return z
+
+
+def standardise(x, shift: tuple[float, ...] | None, scale: tuple[float, ...] | None):
+    if shift is None:
+        return x
+    return (x - jnp.asarray(shift, x.dtype)) / jnp.asarray(scale, x.dtype)
+
+
+def data_statistics(z: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """Mean and standard deviation per column, with a floor so constant columns stay finite."""
+    z = np.asarray(z, dtype=np.float64)
+    mean = z.mean(axis=0)
+    std = z.std(axis=0)
+    floor = 1e-8 * max(float(np.abs(z).max()), 1.0)
+    std = np.where(std > floor, std, 1.0)
+    return tuple(float(v) for v in mean), tuple(float(v) for v in std)
+
+
+@functools.lru_cache(maxsize=None)
+def skew_assembly(n: int) -> np.ndarray:
+    """(n*n, n(n-1)/2) matrix mapping the strict upper triangle to a flat antisymmetric matrix.
+
+    Exactly n(n-1)/2 outputs parametrise an antisymmetric matrix: the diagonal is zero by
+    construction, so no output is wasted on it (the seed paper used n(n+1)/2).
+    """
+    rows, cols = np.triu_indices(n, k=1)
+    m = len(rows)
+    P = np.zeros((n * n, m))
+    P[rows * n + cols, np.arange(m)] = 1.0
+    P[cols * n + rows, np.arange(m)] = -1.0
+    return P
+
+
+@functools.lru_cache(maxsize=None)
+def lower_assembly(n: int) -> np.ndarray:
+    """(n*n, n(n+1)/2) matrix mapping outputs to a flat lower-triangular matrix."""
+    rows, cols = np.tril_indices(n)
+    m = len(rows)
+    P = np.zeros((n * n, m))
+    P[rows * n + cols, np.arange(m)] = 1.0
+    return P
+
+
+class FoldedHead(eqx.Module):
+    """Final linear layer with a fixed assembly folded in: returns ``diag(r) P (W h + b)``.
+
+    ``P`` is :func:`skew_assembly` or :func:`lower_assembly`; ``r`` (``row_scale``) carries the
+    congruence of the state normalisation (see :mod:`metriplex.structure.scaling`).
+    """
+
+    weight: jax.Array
+    bias: jax.Array
+    n: int = eqx.field(static=True)
+    triangle: str = eqx.field(static=True)
+    row_scale: tuple[float, ...] | None = eqx.field(static=True)
+
+    def __init__(self, width: int, n: int, triangle: str, row_scale, init_scale: float, *, key):
+        self.n = n
+        self.triangle = triangle
+        m = self._assembly().shape[1]
+        lim = init_scale / np.sqrt(width)
+        self.weight = jr.uniform(key, (m, width), minval=-lim, maxval=lim)
+        self.bias = jnp.zeros((m,))
+        self.row_scale = None if row_scale is None else tuple(float(v) for v in row_scale)
+
+    def _assembly(self) -> np.ndarray:
+        return skew_assembly(self.n) if self.triangle == "skew" else lower_assembly(self.n)
+
+    def __call__(self, h):
+        P = self._assembly()
+        if self.row_scale is not None:
+            P = np.asarray(self.row_scale)[:, None] * P
+        P = jnp.asarray(P, h.dtype)
+        # P @ W does not depend on the sample, so under vmap XLA computes it once per batch.
+        flat = (P @ self.weight) @ h + P @ self.bias
+        return flat.reshape(self.n, self.n)

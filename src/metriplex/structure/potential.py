@@ -1,0 +1,215 @@
+r"""Scalar potentials: the energy :math:`E(x)` and the entropy :math:`S(x)`.
+
+Every potential maps a state ``x`` of shape ``(n,)`` to a scalar; its gradient is taken by
+autodiff in :class:`metriplex.GenericModel`.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, Callable
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import MetriplexError
+from .._types import Scalar, State
+from ._mlp import Hidden, data_statistics, standardise
+from ._registry import not_serialisable, register
+
+
+class AbstractPotential(eqx.Module):
+    """A scalar function of the state."""
+
+    @abc.abstractmethod
+    def __call__(self, x: State) -> Scalar: ...
+
+    def spec(self) -> dict[str, Any]:
+        raise not_serialisable(self)
+
+
+class FeatureMap(eqx.Module):
+    r"""Fixed input features: squared distances :math:`|x_a - x_b|^2` and raw components.
+
+    ``squared_norms`` is a tuple of ``(a, b)`` index tuples (``b`` may be empty, giving
+    :math:`|x_a|^2`); ``passthrough`` lists components passed unchanged. The paper's pendulum
+    featurisation is ``squared_norms=(((0,1),()), ((2,3),(0,1)), ((4,5),()), ((6,7),()))``,
+    ``passthrough=(8, 9)``: rotation-invariant by construction.
+    """
+
+    squared_norms: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = eqx.field(static=True)
+    passthrough: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(self, squared_norms=(), passthrough=()):
+        self.squared_norms = tuple(
+            (tuple(int(i) for i in a), tuple(int(i) for i in b)) for a, b in squared_norms
+        )
+        self.passthrough = tuple(int(i) for i in passthrough)
+        for a, b in self.squared_norms:
+            if b and len(a) != len(b):
+                raise MetriplexError(
+                    f"a squared distance |x_a - x_b|^2 needs index groups of equal length; got "
+                    f"a={a}, b={b}."
+                )
+
+    @property
+    def size(self) -> int:
+        return len(self.squared_norms) + len(self.passthrough)
+
+    def check(self, n: int) -> None:
+        used = [i for a, b in self.squared_norms for i in (*a, *b)] + list(self.passthrough)
+        bad = [i for i in used if not 0 <= i < n]
+        if bad:
+            raise MetriplexError(
+                f"feature indices must lie in [0, {n - 1}] for a state of {n} variables; got "
+                f"{bad}."
+            )
+
+    def __call__(self, x):
+        parts = []
+        for a, b in self.squared_norms:
+            d = x[jnp.array(a)] - (x[jnp.array(b)] if b else 0.0)
+            parts.append(jnp.sum(d**2)[None])
+        if self.passthrough:
+            parts.append(x[jnp.array(self.passthrough)])
+        return jnp.concatenate(parts)
+
+    def to_json(self):
+        return {
+            "squared_norms": [[list(a), list(b)] for a, b in self.squared_norms],
+            "passthrough": list(self.passthrough),
+        }
+
+
+@register("potential", "mlp")
+class MLPPotential(AbstractPotential):
+    r"""A learned potential: an MLP with C^\infty activations, :math:`\mathbb R^n\to\mathbb R`.
+
+    Inputs (after the optional ``features``) are standardised with statistics of ``data`` when
+    given, so that states of very different magnitudes (e.g. temperatures ~300 and entropies
+    ~1e-2) are learned equally well.
+
+    ```python
+    E = MLPPotential(10, width=64, depth=2, key=jr.key(0))
+    E(jnp.zeros(10))  # a scalar
+    ```
+    """
+
+    hidden: Hidden
+    out: eqx.nn.Linear
+    n: int = eqx.field(static=True)
+    features: FeatureMap | None
+    shift: tuple[float, ...] | None = eqx.field(static=True)
+    scale: tuple[float, ...] | None = eqx.field(static=True)
+
+    def __init__(
+        self,
+        n: int,
+        *,
+        width: int = 64,
+        depth: int = 2,
+        activation: str = "softplus",
+        features: FeatureMap | None = None,
+        data=None,
+        shift=None,
+        scale=None,
+        key,
+    ):
+        import jax.random as jr
+
+        self.n = n
+        self.features = features
+        if features is not None:
+            features.check(n)
+        in_size = n if features is None else features.size
+        if data is not None:
+            z = np.asarray(data)
+            if features is not None:
+                import jax
+
+                z = np.asarray(jax.vmap(features)(jnp.asarray(z)))
+            shift, scale = data_statistics(z)
+        self.shift = None if shift is None else tuple(float(v) for v in shift)
+        self.scale = None if scale is None else tuple(float(v) for v in scale)
+        hkey, okey = jr.split(key)
+        self.hidden = Hidden(in_size, width, depth, activation, key=hkey)
+        self.out = eqx.nn.Linear(width, "scalar", key=okey)
+
+    def __call__(self, x: State) -> Scalar:
+        z = x if self.features is None else self.features(x)
+        return self.out(self.hidden(standardise(z, self.shift, self.scale)))
+
+    def spec(self):
+        return {
+            "kind": "mlp",
+            "width": self.out.in_features,
+            "depth": len(self.hidden.layers),
+            "activation": self.hidden.activation,
+            "features": None if self.features is None else self.features.to_json(),
+            "shift": self.shift,
+            "scale": self.scale,
+        }
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        feats = spec.get("features")
+        return cls(
+            n,
+            width=spec["width"],
+            depth=spec["depth"],
+            activation=spec.get("activation", "softplus"),
+            features=None if feats is None else FeatureMap(**feats),
+            shift=spec.get("shift"),
+            scale=spec.get("scale"),
+            key=key,
+        )
+
+
+@register("potential", "sum")
+class SumOf(AbstractPotential):
+    r"""A known linear potential :math:`S(x) = \sum_{i\in I} x_i` (e.g. total entropy)."""
+
+    indices: tuple[int, ...] = eqx.field(static=True)
+
+    def __init__(self, indices):
+        self.indices = tuple(int(i) for i in indices)
+        if not self.indices:
+            raise MetriplexError("SumOf needs at least one index; got an empty list.")
+
+    def __call__(self, x: State) -> Scalar:
+        return jnp.sum(x[jnp.array(self.indices)])
+
+    def spec(self):
+        return {"kind": "sum", "indices": list(self.indices)}
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls(spec["indices"])
+
+
+@register("potential", "zero")
+class ZeroPotential(AbstractPotential):
+    """The zero potential (e.g. no entropy for a conservative system)."""
+
+    def __call__(self, x: State) -> Scalar:
+        return jnp.zeros((), x.dtype)
+
+    def spec(self):
+        return {"kind": "zero"}
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls()
+
+
+class Known(AbstractPotential):
+    """A potential given by a user function ``fn(x) -> scalar`` written with ``jax.numpy``.
+
+    Used for ground-truth systems. It cannot be written to a model file (files never hold code).
+    """
+
+    fn: Callable = eqx.field(static=True)
+
+    def __call__(self, x: State) -> Scalar:
+        return self.fn(x)
