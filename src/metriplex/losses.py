@@ -114,7 +114,7 @@ class Loss(eqx.Module):
 
 
 def _sq(v, scale):
-    return jnp.mean(jnp.sum((v / scale) ** 2, axis=-1))
+    return jnp.mean(jnp.sum((v / scale[None, :]) ** 2, axis=-1))
 
 
 class SchemeResidual(AbstractLossTerm):
@@ -216,10 +216,11 @@ class JacobiPenalty(AbstractLossTerm):
         inv = 1.0 / batch.scale
         if self.estimator == "exact":
             J = jax.vmap(model.jacobi_tensor)(x)
-            J = J * inv[:, None, None] * inv[None, :, None] * inv[None, None, :]
+            w3 = inv[:, None, None] * inv[None, :, None] * inv[None, None, :]
+            J = J * w3[None]
             return jnp.mean(jnp.sum(J**2, axis=(1, 2, 3)))
         B, n = x.shape
-        probes = jr.normal(key, (3, B, self.probes, n), x.dtype) * inv
+        probes = jr.normal(key, (3, B, self.probes, n), x.dtype) * inv[None, None, None, :]
         vals = jax.vmap(
             jax.vmap(lambda xi, u, v, w: stochastic_jacobi(model, xi, u, v, w),
                      in_axes=(None, 0, 0, 0)),

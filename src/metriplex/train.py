@@ -197,7 +197,9 @@ def fit(
             idx = jr.randint(kb, (bsz,), 0, n_train)
             batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx], full_train.scale)
             (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
-            updates, opt_state = optimizer.update(grads, opt_state, params)
+            # Optax mixes int step counts with floats; keep it working under strict promotion.
+            with jax.numpy_dtype_promotion("standard"):
+                updates, opt_state = optimizer.update(grads, opt_state, params)
             params = eqx.apply_updates(params, updates)
             return (params, opt_state), (value, parts)
 
