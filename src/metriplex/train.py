@@ -21,6 +21,7 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
+from . import _checkpoint
 from ._errors import MetriplexError, TrainingDiverged
 from ._model import GenericModel
 from .data import Pairs, Trajectories
@@ -122,6 +123,9 @@ def fit(
     dtype=None,
     progress: bool = True,
     seed_split: int = 0,
+    checkpoint: str | None = None,
+    checkpoint_every: int = 10,
+    resume: bool = False,
     key,
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
@@ -144,6 +148,11 @@ def fit(
         training states, 1 for constant columns).
     dtype:
         ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the model's.
+    checkpoint:
+        Path of a checkpoint file, written atomically every ``checkpoint_every`` evaluations,
+        on Ctrl-C and at the end: parameters, optimiser state, step, PRNG key, best model and
+        history. With ``resume=True`` training continues from it and reaches the same result as
+        an uninterrupted run with the same arguments.
 
     ```python
     model, history = fit(model, data, steps=2000, key=jr.key(0))
@@ -227,14 +236,58 @@ def fit(
     best_params = params
     best_value = math.inf
     since_best = 0
-    start = time.perf_counter()
     done = 0
     key, eval_key = jr.split(key)
-    bar = tqdm(total=steps, disable=not progress, desc="fit", unit="step", leave=False)
+    train_value, train_parts = math.nan, {}
+    if resume:
+        if checkpoint is None:
+            raise MetriplexError("resume=True needs the `checkpoint` path to resume from.")
+        state = _checkpoint.load(checkpoint, (params, opt_state, best_params, jr.key_data(key)))
+        (params, opt_state, best_params, key_data), meta = state
+        key = jr.wrap_key_data(key_data)
+        history = History.from_json(meta["history"])
+        done, best_value, since_best = meta["done"], meta["best_value"], meta["since_best"]
+        train_value, train_parts = meta["train_value"], meta["train_parts"]
+        if history.stopped.startswith("interrupted"):
+            history.stopped = ""
+        if done > steps:
+            raise MetriplexError(
+                f"the checkpoint is at step {done}, beyond the requested {steps} steps; ask for "
+                "at least as many steps as the interrupted run."
+            )
+
+    def save_checkpoint():
+        if checkpoint is None:
+            return
+        meta = dict(
+            done=done, best_value=best_value, since_best=since_best, history=history.to_json(),
+            train_value=train_value, train_parts=train_parts,
+        )
+        _checkpoint.save(checkpoint, (params, opt_state, best_params, jr.key_data(key)), meta)
+
+    start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
+    evaluations = 0
+    resumed_at = done if resume else -1
+    bar = tqdm(total=steps, initial=done, disable=not progress, desc="fit", unit="step", leave=False)
     try:
         while True:
+            if done == resumed_at:
+                # This evaluation is already in the restored history; continue training.
+                resumed_at = -1
+                if done >= steps or history.stopped.startswith("early stop"):
+                    break
+                length = min(eval_every, steps - done)
+                key, sub = jr.split(key)
+                params, opt_state, train_value, train_parts = run_chunk(
+                    params, opt_state, sub, length
+                )
+                train_value = float(train_value)
+                train_parts = {k: float(v) for k, v in train_parts.items()}
+                done += length
+                bar.update(length)
+                continue
             if done > 0 or steps == 0:
-                tr_total, tr_parts = train_value, train_parts  # noqa: F821 (set below)
+                tr_total, tr_parts = train_value, train_parts
             else:
                 tr_total, tr_parts = eval_pairs(params, train_pairs, eval_key)
             if valid_pairs is not None:
@@ -266,6 +319,9 @@ def fit(
             else:
                 since_best += 1
             bar.set_postfix(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
+            evaluations += 1
+            if evaluations % max(checkpoint_every, 1) == 0:
+                save_checkpoint()
             if done >= steps:
                 history.stopped = history.stopped or "completed"
                 break
@@ -283,4 +339,5 @@ def fit(
         history.stopped = f"interrupted at step {done}"
     finally:
         bar.close()
+    save_checkpoint()
     return eqx.combine(best_params, static), history

@@ -1,0 +1,45 @@
+"""Training checkpoints: a JSON header (step, history, ...) + Equinox leaves, written atomically."""
+
+from __future__ import annotations
+
+import io as _io
+import json
+from pathlib import Path
+
+import equinox as eqx
+
+from ._errors import MetriplexError
+
+MAGIC = b"METRIPLEX-CHECKPOINT\n"
+
+
+def save(path, tree, meta: dict) -> None:
+    from .io import _json_default, atomic_write
+
+    buf = _io.BytesIO()
+    buf.write(MAGIC)
+    buf.write(json.dumps(meta, default=_json_default).encode() + b"\n")
+    eqx.tree_serialise_leaves(buf, tree)
+    with atomic_write(path, "wb") as f:
+        f.write(buf.getvalue())
+
+
+def load(path, like):
+    path = Path(path)
+    if not path.exists():
+        raise MetriplexError(
+            f"no checkpoint at {str(path)!r}; nothing to resume. Start the run without --resume."
+        )
+    with open(path, "rb") as f:
+        if f.read(len(MAGIC)) != MAGIC:
+            raise MetriplexError(f"{str(path)!r} is not a metriplex checkpoint (bad magic bytes).")
+        try:
+            meta = json.loads(f.readline())
+            tree = eqx.tree_deserialise_leaves(f, like)
+        except Exception as e:
+            raise MetriplexError(
+                f"checkpoint {str(path)!r} is corrupted or was written for another model or "
+                f"optimiser ({type(e).__name__}: {e}). Resume with the same configuration, or "
+                "start afresh."
+            ) from None
+    return tree, meta

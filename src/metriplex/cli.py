@@ -1,0 +1,295 @@
+"""The ``metriplex`` command line: a thin front that parses options and calls the library.
+
+Bad input ends with one clear message on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import sys
+from pathlib import Path
+
+from ._errors import MetriplexError
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 3
+
+
+def _add_structure_options(p: argparse.ArgumentParser) -> None:
+    from .config import RunConfig
+
+    d = RunConfig()
+    g = p.add_argument_group("structure (what is learned, what is given)")
+    g.add_argument("--energy", help="neural (default)")
+    g.add_argument("--entropy", help="neural | sum:I,J,... (S = sum of those components) | zero")
+    g.add_argument("--poisson", help="neural | canonical:K | zero | casimir3 (n = 3)")
+    g.add_argument("--friction", help="neural | zero")
+    g.add_argument("--degeneracy", help="soft (penalties, default) | exact (by construction)")
+    g.add_argument("--jacobi", help="none | exact | stochastic (Jacobi-identity penalty)")
+    g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
+    g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
+    g.add_argument("--scheme", help="training residual scheme: cn (default) | midpoint | "
+                   "discrete-gradient | rk4")
+    w = p.add_argument_group("loss weights and optimisation")
+    w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
+    w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,
+                   help=f"|L grad S|^2 weight (default {d.w_degeneracy_L})")
+    w.add_argument("--w-degeneracy-M", dest="w_degeneracy_M", type=float,
+                   help=f"|M grad E|^2 weight (default {d.w_degeneracy_M})")
+    w.add_argument("--w-jacobi", type=float, help=f"Jacobi weight (default {d.w_jacobi})")
+    w.add_argument("--width", type=int, help=f"network width (default {d.width})")
+    w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
+    w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
+    w.add_argument("--steps", type=int, help=f"optimiser steps (default {d.steps})")
+    w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
+    w.add_argument("--validation", type=float,
+                   help=f"fraction of trajectories held out (default {d.validation})")
+    w.add_argument("--eval-every", type=int, help=f"steps between validations (default {d.eval_every})")
+    w.add_argument("--patience", type=int, help="early stop after this many validations "
+                   "without improvement (default: never)")
+    w.add_argument("--checkpoint-every", type=int,
+                   help=f"validations between checkpoints (default {d.checkpoint_every})")
+    w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")
+    w.add_argument("--float64", action="store_true", default=None, help="train in float64")
+
+
+def _config_from_args(args):
+    from .config import RunConfig, preset
+
+    base = preset(args.preset) if args.preset else RunConfig()
+    updates = {
+        f.name: getattr(args, f.name)
+        for f in dataclasses.fields(RunConfig)
+        if getattr(args, f.name, None) is not None
+    }
+    return dataclasses.replace(base, **updates)
+
+
+def _check_out(path: Path, overwrite: bool) -> None:
+    if path.exists() and not overwrite:
+        raise MetriplexError(
+            f"output file {str(path)!r} exists; refusing to overwrite it. Pass --overwrite or "
+            "choose another --out."
+        )
+
+
+def cmd_simulate(args) -> None:
+    from . import systems
+    from .io import write
+
+    out = Path(args.out)
+    _check_out(out, args.overwrite)
+    if args.float64:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+    system = systems.get_system(args.system, **_params(args.param))
+    data = systems.generate(
+        system, trajectories=args.trajectories, steps=args.steps, dt=args.dt, seed=args.seed
+    )
+    write(out, data)
+    print(f"wrote {len(data)} trajectories x {args.steps + 1} states of {args.system} to {out}")
+
+
+def _params(items):
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise MetriplexError(f"--param expects NAME=VALUE; got {item!r}.")
+        params[key.replace("-", "_")] = value
+    return params
+
+
+def cmd_train(args) -> None:
+    from .io import read
+    from .runs import evaluate_run, train_run, write_json
+
+    data = read(args.data)
+    config = _config_from_args(args)
+    out = Path(args.out)
+    model, history, train, valid, seconds = train_run(
+        data, config, out, overwrite=args.overwrite, resume=args.resume,
+        progress=not args.quiet,
+    )
+    target = valid if valid is not None else train
+    metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures")
+    metrics["train_seconds"] = seconds
+    metrics["evaluated_on"] = "validation trajectories" if valid is not None else "training data"
+    metrics["stopped"] = history.stopped
+    write_json(out / "metrics.json", metrics)
+    print(
+        f"trained {history.step[-1]} steps in {seconds:.1f} s ({history.stopped}); best "
+        f"validation loss {history.best_valid:.3e} at step {history.best_step}; rollout error "
+        f"on {metrics['evaluated_on']}: {metrics['rollout_error_mean']:.3e}; run folder: {out}"
+    )
+
+
+def cmd_rollout(args) -> None:
+    import numpy as np
+
+    from .data import Trajectories
+    from .diagnostics import rollout_data
+    from .integrate import scheme_from_name
+    from .io import load, read, write
+    from .runs import check_names
+
+    out = Path(args.out)
+    _check_out(out, args.overwrite)
+    model = load(args.run)
+    data = read(args.data)
+    check_names(args.run, data)
+    result, _, lengths = rollout_data(model, data, scheme=scheme_from_name(args.scheme))
+    ts, xs = np.asarray(result.ts), np.asarray(result.xs)
+    failed = np.asarray(result.failed_step)
+    pieces = []
+    for k, T in enumerate(lengths):
+        stop = T if failed[k] < 0 or failed[k] >= T else int(failed[k])
+        if stop < T:
+            print(
+                f"warning: trajectory {data.ids[k]}: the implicit step to t={ts[k, stop]:.6g} did "
+                f"not converge; writing the {stop} states computed before it.",
+                file=sys.stderr,
+            )
+        if stop >= 2:
+            pieces.append((ts[k, :stop], xs[k, :stop]))
+    if not pieces:
+        raise MetriplexError("no trajectory could be rolled out past its first step; nothing to "
+                             "write. Try --scheme rk4 or a smaller time step.")
+    write(out, Trajectories.from_list(pieces, data.names))
+    print(f"wrote {len(pieces)} predicted trajectories to {out}")
+
+
+def cmd_evaluate(args) -> None:
+    import json
+
+    from .io import load, read, write_json
+    from .runs import check_names, evaluate_run
+
+    model = load(args.run)
+    data = read(args.data)
+    check_names(args.run, data)
+    figures = Path(args.figures) if args.figures else None
+    metrics = evaluate_run(model, data, scheme=args.scheme, figures=figures, horizon=args.horizon)
+    try:
+        from .verdict import verdict
+    except ImportError:
+        pass
+    else:
+        metrics["verdict"] = verdict(model, data, metrics)
+    if args.out:
+        out = Path(args.out)
+        _check_out(out, args.overwrite)
+        write_json(out, metrics)
+    summary = {k: v for k, v in metrics.items() if not isinstance(v, list)}
+    print(json.dumps(summary, indent=2, default=str))
+
+
+def cmd_reproduce(args) -> None:
+    from .experiments import run_experiment
+
+    run_experiment(args.experiment, quick=args.quick, out=args.out, overwrite=args.overwrite,
+                   degeneracy=args.degeneracy, progress=not args.quiet)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="metriplex",
+        description="Learn thermodynamically consistent (GENERIC) dynamics "
+        "dx/dt = L(x) grad E(x) + M(x) grad S(x) from trajectories.",
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="generate trajectories of a built-in system",
+                       description=_systems_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("system", metavar="SYSTEM")
+    p.add_argument("--trajectories", type=int, required=True)
+    p.add_argument("--steps", type=int, required=True)
+    p.add_argument("--dt", type=float, required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="system parameter, e.g. --param parameters=spnn")
+    p.add_argument("--float64", action="store_true", help="integrate in float64")
+    p.add_argument("--out", required=True)
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("train", help="learn a GENERIC model from trajectory data")
+    p.add_argument("data", metavar="DATA")
+    p.add_argument("--out", required=True, metavar="RUN_DIR")
+    p.add_argument("--preset", help="rigid-body | pendulum-energetic | pendulum-temperature | "
+                   "gas-containers")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_structure_options(p)
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("rollout", help="predict every trajectory of DATA from its first state")
+    p.add_argument("run", metavar="RUN_DIR")
+    p.add_argument("data", metavar="DATA")
+    p.add_argument("--out", required=True)
+    p.add_argument("--scheme", default="cn")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_rollout)
+
+    p = sub.add_parser("evaluate", help="metrics (and figures) of a trained model on DATA")
+    p.add_argument("run", metavar="RUN_DIR")
+    p.add_argument("data", metavar="DATA")
+    p.add_argument("--out", metavar="METRICS.json")
+    p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
+    p.add_argument("--scheme", default="cn")
+    p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
+    p.add_argument("--overwrite", action="store_true")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("reproduce", help="run a reference experiment end to end, with figures")
+    p.add_argument("experiment", metavar="EXPERIMENT",
+                   help="rigid-body | pendulum-energetic | pendulum-temperature | gas-containers")
+    p.add_argument("--quick", action="store_true", help="reduced size (about two minutes)")
+    p.add_argument("--out", default=None, help="output folder (default runs/EXPERIMENT)")
+    p.add_argument("--degeneracy", default="soft", help="soft | exact")
+    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_reproduce)
+    return parser
+
+
+def _version() -> str:
+    from . import __version__
+
+    return f"metriplex {__version__}"
+
+
+def _systems_help() -> str:
+    try:
+        from . import systems
+
+        return "Built-in systems:\n" + systems.describe()
+    except Exception:  # the listing must never break --help
+        return "Generate trajectories of a built-in ground-truth system."
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        args.func(args)
+    except MetriplexError as e:
+        print(f"metriplex {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"metriplex {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except OSError as e:
+        print(f"metriplex {args.command}: error: {e.strerror or e}: {e.filename or ''}",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

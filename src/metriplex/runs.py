@@ -1,0 +1,177 @@
+"""Run folders: what ``metriplex train`` writes and ``rollout``/``evaluate`` read.
+
+A run folder holds ``model.mpx`` (the best model), ``config.json`` (the resolved configuration,
+with the data's variable names and the validation split), ``history.json``, ``checkpoint.ckpt``
+(to resume), ``metrics.json`` and ``figures/`` (each figure as PNG, PDF and the raw NPZ).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+
+from . import plots
+from ._errors import MetriplexError, TrainingDiverged
+from .config import RunConfig, build_loss, build_model, data_scale, validate
+from .data import Trajectories
+from .diagnostics import error_over_time, evaluate, rollout_data
+from .integrate import scheme_from_name
+from .io import load, save, write_json
+from .train import History, fit
+
+
+def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
+    if resume:
+        if not (out / "checkpoint.ckpt").exists():
+            raise MetriplexError(
+                f"cannot resume: {str(out)!r} holds no checkpoint.ckpt. Start a new run without "
+                "--resume."
+            )
+        return
+    if out.exists() and any(out.iterdir()) and not overwrite:
+        raise MetriplexError(
+            f"output folder {str(out)!r} exists and is not empty; refusing to overwrite it. Pass "
+            "--overwrite, choose another --out, or --resume an interrupted run."
+        )
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def train_run(
+    data: Trajectories,
+    config: RunConfig,
+    out: str | Path,
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    progress: bool = True,
+):
+    """Train a model described by ``config`` on ``data`` and fill the run folder ``out``."""
+    out = Path(out)
+    validate(config, data.n)
+    if config.float64:
+        jax.config.update("jax_enable_x64", True)
+    dtype = jnp.float64 if config.float64 else jnp.float32
+    _prepare_dir(out, overwrite=overwrite, resume=resume)
+    if resume:
+        saved = RunConfig.from_json(json.loads((out / "config.json").read_text())["config"])
+        if saved != config:
+            diff = {k: (getattr(saved, k), getattr(config, k)) for k in saved.to_json()
+                    if getattr(saved, k) != getattr(config, k)}
+            raise MetriplexError(
+                f"--resume needs the configuration of the interrupted run; these differ "
+                f"(saved, given): {diff}. Repeat the original options."
+            )
+    train, valid = data.split(config.validation, seed=config.seed)
+    model_key, fit_key = jr.split(jr.key(config.seed))
+    model = build_model(config, train, key=model_key)
+    model = jax.tree_util.tree_map(
+        lambda a: a.astype(dtype) if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating) else a,
+        model,
+    )
+    loss = build_loss(config)
+    header = {
+        "config": config.to_json(),
+        "names": list(data.names),
+        "n": data.n,
+        "train_trajectories": [int(i) for i in train.ids],
+        "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
+        "loss_terms": list(loss.names),
+    }
+    write_json(out / "config.json", header)
+    start = time.perf_counter()
+    try:
+        model, history = fit(
+            model,
+            train,
+            loss=loss,
+            learning_rate=config.lr,
+            steps=config.steps,
+            batch_size=config.batch_size,
+            validation=valid,
+            eval_every=config.eval_every,
+            patience=config.patience,
+            scale=data_scale(train),
+            dtype=dtype,
+            progress=progress,
+            checkpoint=str(out / "checkpoint.ckpt"),
+            checkpoint_every=config.checkpoint_every,
+            resume=resume,
+            key=fit_key,
+        )
+    except TrainingDiverged as e:
+        if e.model is not None:
+            save(out / "model.mpx", e.model, n=data.n, names=data.names)
+        if e.history is not None:
+            write_json(out / "history.json", e.history.to_json())
+        raise
+    seconds = time.perf_counter() - start
+    save(out / "model.mpx", model, n=data.n, names=data.names,
+         extra={"train_seconds": seconds})
+    write_json(out / "history.json", history.to_json())
+    plots.save_figure(
+        plots.loss_curves(history), out / "figures" / "loss",
+        step=np.asarray(history.step),
+        **{f"train_{k}": np.asarray(v) for k, v in history.train.items()},
+        **{f"valid_{k}": np.asarray(v) for k, v in history.valid.items()},
+    )
+    return model, history, train, valid, seconds
+
+
+def run_config(run_dir: str | Path) -> dict:
+    path = Path(run_dir) / "config.json"
+    if not path.exists():
+        return {}
+    return json.loads(path.read_text())
+
+
+def check_names(run_dir, data: Trajectories) -> None:
+    header = run_config(run_dir)
+    n = header.get("n")
+    if n is not None and n != data.n:
+        raise MetriplexError(
+            f"the data have {data.n} state variables but the model in {str(run_dir)!r} was "
+            f"trained on {n} ({', '.join(header.get('names', []))}). Pass data with the same "
+            "columns."
+        )
+
+
+def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path | None = None,
+                 horizon: float | None = None) -> dict:
+    """Metrics on ``data`` and, if ``figures`` is given, the standard figure set."""
+    sch = scheme_from_name(scheme)
+    report = evaluate(model, data, scheme=sch, horizon=horizon)
+    if figures is not None:
+        report_figures(model, data, figures, scheme=scheme)
+    return report
+
+
+def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0):
+    """Trajectories, error over time and learned E, S for trajectory ``k`` of ``data``."""
+    out, xs, lengths = rollout_data(model, data, scheme=scheme_from_name(scheme))
+    T = int(lengths[k])
+    ts = np.asarray(out.ts)[k, :T]
+    pred = np.asarray(out.xs)[k, :T]
+    obs = xs[k, :T]
+    names = list(data.names)
+    plots.save_figure(plots.trajectories(ts, pred, obs, names), folder / "trajectories",
+                      t=ts, learned=pred, observed=obs, names=np.array(names))
+    err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
+    plots.save_figure(plots.error_over_time(ts, err), folder / "error", t=ts, error=err)
+    E = np.asarray(jax.vmap(model.energy)(jnp.nan_to_num(jnp.asarray(pred))))
+    S = np.asarray(jax.vmap(model.entropy)(jnp.nan_to_num(jnp.asarray(pred))))
+    plots.save_figure(plots.energy_entropy(ts, E, S), folder / "energy_entropy", t=ts,
+                      energy=E, entropy=S)
+
+
+def load_run(run_dir):
+    return load(run_dir)
+
+
+def history_of(run_dir) -> History:
+    return History.from_json(json.loads((Path(run_dir) / "history.json").read_text()))
