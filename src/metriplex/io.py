@@ -68,7 +68,11 @@ def _json_default(o):
 # -- trajectories -----------------------------------------------------------------------------
 
 def read(path: str | os.PathLike) -> Trajectories:
-    """Read trajectories from ``.npz`` or ``.csv`` (long table); HDF5 and ``.mat`` if available.
+    """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``) or MATLAB
+    (``.mat``). The layouts are in DESIGN.md §2 and :mod:`metriplex._formats`.
+
+    A malformed file raises :class:`MetriplexError` naming the file, the rule it breaks, the
+    value found and the fix.
 
     ```python
     data = mx.read("data.npz")
@@ -88,11 +92,23 @@ def read(path: str | os.PathLike) -> Trajectories:
             f"cannot read {str(path)!r}: unknown extension {suffix!r}. Supported: "
             f"{', '.join(sorted(readers))}."
         )
-    return readers[suffix](path)
+    try:
+        return readers[suffix](path)
+    except MetriplexError as e:
+        if str(path) in str(e):
+            raise
+        raise MetriplexError(f"data file {str(path)!r}: {e}") from None
 
 
 def write(path: str | os.PathLike, data: Trajectories) -> None:
-    """Write trajectories as the long table (``.npz`` or ``.csv``), atomically."""
+    """Write trajectories, atomically: the long table (``.npz``, ``.csv``), HDF5 (``.h5``,
+    ``.hdf5``) or MATLAB (``.mat``). :func:`read` gives back the same trajectories exactly.
+    """
+    if not isinstance(data, Trajectories):
+        raise MetriplexError(
+            f"write() takes a Trajectories; got {type(data).__name__}. Build one with "
+            "Trajectories.from_list([(t, x), ...], names=...)."
+        )
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".npz":
@@ -100,17 +116,33 @@ def write(path: str | os.PathLike, data: Trajectories) -> None:
         np.savez(buf, trajectory=data.trajectory, t=data.t, x=data.x, names=np.array(data.names))
         with atomic_write(path, "wb") as f:
             f.write(buf.getvalue())
-    elif suffix == ".csv":
+        return
+    if suffix == ".csv":
+        for name in data.names:
+            if name != name.strip() or not name:
+                raise MetriplexError(
+                    f"cannot write {str(path)!r}: variable name {name!r} has surrounding "
+                    "whitespace, which CSV readers strip, so it would not read back. Rename it "
+                    "(data.with_names([...])) or write .npz."
+                )
         with atomic_write(path, "w") as f:
             w = csv.writer(f, lineterminator="\n")
             w.writerow(["trajectory", "t", *data.names])
+            # repr gives the shortest decimal that parses back to the same float64.
             for i, t, x in zip(data.trajectory, data.t, data.x):
                 w.writerow([int(i), repr(float(t)), *(repr(float(v)) for v in x)])
-    else:
+        return
+    writers = {}
+    with contextlib.suppress(ImportError):
+        from . import _formats
+
+        writers = _formats.WRITERS
+    if suffix not in writers:
         raise MetriplexError(
-            f"cannot write {str(path)!r}: trajectories are written as .npz or .csv; got "
-            f"{suffix!r}."
+            f"cannot write {str(path)!r}: unknown extension {suffix!r}. Trajectories are written "
+            f"as {', '.join(sorted({'.npz', '.csv', *writers}))}."
         )
+    writers[suffix](path, data)
 
 
 def _readers():
@@ -123,49 +155,152 @@ def _readers():
 
 
 def read_npz(path: Path) -> Trajectories:
+    """The long table from NPZ: ``trajectory`` (N,), ``t`` (N,), ``x`` (N, n), ``names`` (n,)."""
+    path = Path(path)
+    where = f"NPZ file {str(path)!r}"
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as e:  # zipfile/format errors differ by numpy version
-        raise MetriplexError(f"{str(path)!r} is not a readable NPZ file ({e}).") from None
+        raise MetriplexError(
+            f"{str(path)!r} is not a readable NPZ file ({type(e).__name__}: {e}). It may be "
+            "truncated or of another format; write it with metriplex.write or numpy.savez."
+        ) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise MetriplexError(
+            f"{str(path)!r} holds one bare array of shape {z.shape}, not an NPZ archive; the long "
+            "table needs named arrays: np.savez(path, trajectory=..., t=..., x=..., names=...)."
+        )
     with z:
-        missing = [k for k in ("trajectory", "t", "x") if k not in z.files]
+        found = sorted(z.files)
+        missing = [k for k in ("trajectory", "t", "x") if k not in found]
         if missing:
             raise MetriplexError(
-                f"NPZ file {str(path)!r} lacks the array(s) {missing}; the long table needs "
-                "`trajectory` (N,), `t` (N,) and `x` (N, n), optionally `names` (n,). Found "
-                f"{sorted(z.files)}."
+                f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
+                f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
             )
-        names = tuple(str(s) for s in z["names"]) if "names" in z.files else ()
-        return Trajectories(z["trajectory"], z["t"], z["x"], names)
+        unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
+        if unknown:
+            raise MetriplexError(
+                f"{where} holds unknown array(s) {unknown}; the long table holds only "
+                "`trajectory`, `t`, `x` and `names`. If they are state variables, make them "
+                "columns of `x`; otherwise remove them."
+            )
+        arrays = {}
+        for k in found:
+            try:
+                arrays[k] = z[k]
+            except ValueError as e:
+                if "pickle" not in str(e):
+                    raise MetriplexError(f"array `{k}` of {where} is unreadable ({e}).") from None
+                raise MetriplexError(
+                    f"array `{k}` of {where} is stored as Python objects (pickle), which "
+                    "metriplex never loads because unpickling runs code. Save it as numbers, "
+                    "or names as strings: np.array(names, dtype=str)."
+                ) from None
+            except Exception as e:
+                raise MetriplexError(
+                    f"array `{k}` of {where} is damaged ({type(e).__name__}: {e}); the file "
+                    "may be truncated. Write it again."
+                ) from None
+    names = ()
+    if "names" in arrays:
+        raw = arrays["names"]
+        if raw.dtype.kind not in "US":
+            raise MetriplexError(
+                f"array `names` of {where} must hold strings; it holds {raw.dtype} values "
+                f"{raw.reshape(-1)[:5].tolist()}. Save np.array(names, dtype=str)."
+            )
+        names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in raw.reshape(-1))
+    try:
+        return Trajectories(arrays["trajectory"], arrays["t"], arrays["x"], names)
+    except MetriplexError as e:
+        raise MetriplexError(f"{where}: {e}") from None
 
 
 def read_csv(path: Path) -> Trajectories:
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    rows = [r for r in rows if r and any(c.strip() for c in r)]
+    """The long table from CSV: header ``trajectory,t,<name_1>,...``, one row per state."""
+    path = Path(path)
+    where = f"CSV file {str(path)!r}"
+    rows, lines = [], []
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f)
+            for r in reader:
+                if r and any(c.strip() for c in r):
+                    rows.append(r)
+                    lines.append(reader.line_num)
+    except UnicodeDecodeError as e:
+        raise MetriplexError(
+            f"{where} is not UTF-8 text (byte {e.start} cannot be decoded); it may be binary or "
+            "another format. Save it as UTF-8 CSV."
+        ) from None
+    except csv.Error as e:
+        raise MetriplexError(f"{where} is not valid CSV ({e}). Save it again as plain CSV.") from None
     if not rows:
-        raise MetriplexError(f"CSV file {str(path)!r} is empty; it holds no header and no rows.")
+        raise MetriplexError(f"{where} is empty; it holds no header and no rows.")
     header = [c.strip() for c in rows[0]]
     if len(header) < 3 or header[0] != "trajectory" or header[1] != "t":
+        hint = ""
+        try:
+            [float(c) for c in header]
+            hint = " The first line holds numbers: the header line is missing."
+        except ValueError:
+            pass
         raise MetriplexError(
-            f"CSV file {str(path)!r} must start with the header `trajectory,t,<name_1>,...`; got "
-            f"{','.join(header)!r}. Rename the columns or reorder them."
+            f"{where} must start with the header `trajectory,t,<name_1>,...` (at least one state "
+            f"column); got {','.join(header)!r}.{hint} Add, rename or reorder the columns."
         )
-    body = rows[1:]
+    names = header[2:]
+    for k, name in enumerate(names):
+        if not name:
+            raise MetriplexError(
+                f"{where}: header column {k + 3} has no name; every state column needs one."
+            )
+        if name in names[:k]:
+            raise MetriplexError(
+                f"{where}: header column {k + 3} repeats the variable name {name!r}; names must "
+                "be unique."
+            )
+    body, body_lines = rows[1:], lines[1:]
     if not body:
-        raise MetriplexError(f"CSV file {str(path)!r} has a header but no data rows.")
+        raise MetriplexError(f"{where} has a header but no data rows.")
     width = len(header)
-    for k, r in enumerate(body):
+    for r, line in zip(body, body_lines):
         if len(r) != width:
             raise MetriplexError(
-                f"CSV row {k + 2} of {str(path)!r} has {len(r)} columns; the header has {width}. "
-                "Every row needs `trajectory`, `t` and one value per state variable."
+                f"{where}, line {line}, has {len(r)} columns; the header has {width}. Every row "
+                "needs `trajectory`, `t` and one value per state variable (a short last line "
+                "means a truncated file)."
             )
     try:
-        arr = np.array([[float(c) for c in r] for r in body])
-    except ValueError as e:
-        raise MetriplexError(f"CSV file {str(path)!r} holds a non-numeric value ({e}).") from None
-    return Trajectories(arr[:, 0], arr[:, 1], arr[:, 2:], tuple(header[2:]))
+        arr = np.array(body, dtype=str).astype(np.float64)
+    except ValueError:
+        arr = None
+    if arr is None or not np.all(np.isfinite(arr)):
+        for r, line in zip(body, body_lines):
+            for name, c in zip(header, r):
+                try:
+                    v = float(c)
+                except ValueError:
+                    v = None
+                if v is None or v != v or v in (float("inf"), float("-inf")):
+                    what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
+                    raise MetriplexError(
+                        f"{where}, line {line}, column {name!r} {what}; every cell must be a "
+                        "finite number. Fix or remove that row (interpolate missing samples)."
+                    )
+        raise MetriplexError(f"{where} holds a value that is not a finite number.")
+    ids = arr[:, 0]
+    bad = np.flatnonzero(ids != np.round(ids))
+    if len(bad):
+        raise MetriplexError(
+            f"{where}, line {body_lines[bad[0]]}: trajectory id {body[bad[0]][0].strip()!r} is "
+            "not an integer; ids label trajectories 0, 1, 2, ..."
+        )
+    try:
+        return Trajectories(ids, arr[:, 1], arr[:, 2:], tuple(names))
+    except MetriplexError as e:
+        raise MetriplexError(f"{where}: {e}") from None
 
 
 # -- model files ------------------------------------------------------------------------------
