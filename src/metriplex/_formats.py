@@ -26,8 +26,8 @@ layouts; shapes are MATLAB's ``size()``:
    ``t_vec, tvec, t, time, times, ts`` — shared ``(T,)``/``(1, T)``/``(T, 1)`` or per trajectory
    ``(K, T)`` — or from a step named one of ``dt, Dt, DT, delta_t`` (scalar, or ``(K,)`` per
    trajectory; times are then ``0, dt, 2 dt, ...``). With both, the vector is used and the step
-   must match its spacing. Optional: ``trajectory_ids`` ``(K,)``; constant operators ``L`` and
-   ``M`` ``(n, n)`` (see :func:`read_mat_operators`).
+   must match its spacing (to 0.1 %). Optional: ``trajectory_ids`` ``(K,)``; constant operators
+   ``L`` and ``M`` ``(n, n)``, dense or sparse (see :func:`read_mat_operators`).
 2. *Long table* — the layout of DESIGN.md §2: ``trajectory`` ``(N,)``, ``t`` ``(N,)``,
    ``x`` ``(N, n)``; ragged lengths allowed.
 
@@ -82,7 +82,9 @@ def _check_file(path, kind: str) -> Path:
         what = "is a folder" if path.is_dir() else "does not exist"
         raise MetriplexError(f"{kind} file {_q(path)} {what}; give the path of a data file.")
     if path.stat().st_size == 0:
-        raise MetriplexError(f"{kind} file {_q(path)} is empty (0 bytes); it holds no trajectories.")
+        raise MetriplexError(
+            f"{kind} file {_q(path)} is empty (0 bytes); it holds no trajectories."
+        )
     return path
 
 
@@ -128,6 +130,13 @@ def _real(v, what: str, where: str) -> np.ndarray:
             f"{what} in {where} is a struct; it must be a numeric array. Store the numbers "
             "themselves under that name."
         )
+    if isinstance(v, _Unsupported):
+        raise MetriplexError(
+            f"{what} in {where} is a {v.cls}, which metriplex does not read; store it as a "
+            "plain double array."
+        )
+    if hasattr(v, "toarray"):  # a MATLAB sparse matrix
+        v = v.toarray()
     a = np.asarray(v)
     if a.dtype.kind == "c":
         raise MetriplexError(
@@ -393,7 +402,9 @@ def read_mat(
     return _build(path, "MAT", traj, t, x, names)
 
 
-def read_mat_operators(path: str | os.PathLike, *, states: str | None = None) -> dict[str, np.ndarray]:
+def read_mat_operators(
+    path: str | os.PathLike, *, states: str | None = None
+) -> dict[str, np.ndarray]:
     r"""The constant GENERIC operators stored beside the data: ``{"L": (n, n), "M": (n, n)}``.
 
     Published SPNN datasets store the Poisson matrix ``L`` and friction matrix ``M`` of
@@ -413,10 +424,7 @@ def read_mat_operators(path: str | os.PathLike, *, states: str | None = None) ->
     for key in OPERATOR_KEYS:
         if key not in scope:
             continue
-        v = scope[key]
-        if hasattr(v, "toarray"):  # a MATLAB sparse matrix
-            v = v.toarray()
-        a = _real(v, f"operator `{key}`", where)
+        a = _real(scope[key], f"operator `{key}`", where)
         if a.shape != (n, n):
             raise MetriplexError(
                 f"operator `{key}` in {where} is {_shape(a)}; with {n} state variables it must "
@@ -483,6 +491,13 @@ def _load_mat(path: Path) -> dict[str, Any]:
     import h5py
 
     if h5py.is_hdf5(path):
+        with open(path, "rb") as fh:
+            if not fh.read(6) == b"MATLAB":
+                raise MetriplexError(
+                    f"{_q(path)} is an HDF5 file without MATLAB's v7.3 header, so its arrays "
+                    "cannot be told apart from MATLAB's transposed ones. Give it the suffix .h5 "
+                    "(one group per trajectory) or save it from MATLAB with -v7.3."
+                )
         return _load_mat73(path)
     import scipy.io
     from scipy.io.matlab import MatReadWarning
@@ -543,6 +558,8 @@ def _from_h5mat(obj, f):
 
     cls = _text(obj.attrs.get("MATLAB_class", b""))
     if isinstance(obj, h5py.Group):
+        if "MATLAB_sparse" in obj.attrs:
+            return _h5mat_sparse(obj)
         if cls not in ("", "struct"):
             return _Unsupported(f"MATLAB {cls} object")
         return {k: _from_h5mat(obj[k], f) for k in obj if not k.startswith("#")}
@@ -567,6 +584,19 @@ def _from_h5mat(obj, f):
     if cls in ("", "double", "single") or cls.startswith(("int", "uint")):
         return a
     return _Unsupported(f"MATLAB {cls}")
+
+
+def _h5mat_sparse(g):
+    """A v7.3 sparse matrix: compressed sparse columns ``data``, ``ir``, ``jc``."""
+    jc = np.asarray(g["jc"][()], dtype=np.int64).reshape(-1)
+    rows, cols = int(np.asarray(g.attrs["MATLAB_sparse"]).reshape(-1)[0]), len(jc) - 1
+    out = np.zeros((rows, cols))
+    if "data" in g:
+        ir = np.asarray(g["ir"][()], dtype=np.int64).reshape(-1)
+        data = np.asarray(g["data"][()]).reshape(-1)
+        col = np.repeat(np.arange(cols), np.diff(jc))
+        out[ir, col] = data
+    return out
 
 
 def _mat_scope(variables: dict, path: Path, states: str | None) -> tuple[dict, str]:
@@ -696,8 +726,9 @@ def _mat_times(scope, where, key, shape, *, time, dt):
         if np.all(np.isfinite(steps)) and np.any(bad):
             k, j = np.argwhere(bad)[0]
             raise MetriplexError(
-                f"time step `{step_key}`={expect[k, j]!r} in {where} disagrees with time vector "
-                f"`{t_key}`, whose step {j} in trajectory {k} is {steps[k, j]!r}. Remove the "
+                f"time step `{step_key}`={float(expect[k, j])!r} in {where} disagrees with time "
+                f"vector `{t_key}`, whose step {j} in trajectory {k} is {float(steps[k, j])!r}. "
+                "Remove the "
                 "wrong one (the time vector is used when both are present)."
             )
     return t

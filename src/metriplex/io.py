@@ -158,50 +158,23 @@ def read_npz(path: Path) -> Trajectories:
     """The long table from NPZ: ``trajectory`` (N,), ``t`` (N,), ``x`` (N, n), ``names`` (n,)."""
     path = Path(path)
     where = f"NPZ file {str(path)!r}"
-    try:
-        z = np.load(path, allow_pickle=False)
-    except Exception as e:  # zipfile/format errors differ by numpy version
-        raise MetriplexError(
-            f"{str(path)!r} is not a readable NPZ file ({type(e).__name__}: {e}). It may be "
-            "truncated or of another format; write it with metriplex.write or numpy.savez."
-        ) from None
-    if not isinstance(z, np.lib.npyio.NpzFile):
-        raise MetriplexError(
-            f"{str(path)!r} holds one bare array of shape {z.shape}, not an NPZ archive; the long "
-            "table needs named arrays: np.savez(path, trajectory=..., t=..., x=..., names=...)."
-        )
-    with z:
-        found = sorted(z.files)
-        missing = [k for k in ("trajectory", "t", "x") if k not in found]
-        if missing:
+    # Our own handle: np.load leaks the one it opens when the archive is unreadable.
+    with open(path, "rb") as fh:
+        try:
+            z = np.load(fh, allow_pickle=False)
+        except Exception as e:  # zipfile/format errors differ by numpy version
             raise MetriplexError(
-                f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
-                f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
-            )
-        unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
-        if unknown:
+                f"{str(path)!r} is not a readable NPZ file ({type(e).__name__}: {e}). It may be "
+                "truncated or of another format; write it with metriplex.write or numpy.savez."
+            ) from None
+        if not isinstance(z, np.lib.npyio.NpzFile):
             raise MetriplexError(
-                f"{where} holds unknown array(s) {unknown}; the long table holds only "
-                "`trajectory`, `t`, `x` and `names`. If they are state variables, make them "
-                "columns of `x`; otherwise remove them."
+                f"{str(path)!r} holds one bare array of shape {z.shape}, not an NPZ archive; the "
+                "long table needs named arrays: np.savez(path, trajectory=..., t=..., x=..., "
+                "names=...)."
             )
-        arrays = {}
-        for k in found:
-            try:
-                arrays[k] = z[k]
-            except ValueError as e:
-                if "pickle" not in str(e):
-                    raise MetriplexError(f"array `{k}` of {where} is unreadable ({e}).") from None
-                raise MetriplexError(
-                    f"array `{k}` of {where} is stored as Python objects (pickle), which "
-                    "metriplex never loads because unpickling runs code. Save it as numbers, "
-                    "or names as strings: np.array(names, dtype=str)."
-                ) from None
-            except Exception as e:
-                raise MetriplexError(
-                    f"array `{k}` of {where} is damaged ({type(e).__name__}: {e}); the file "
-                    "may be truncated. Write it again."
-                ) from None
+        with z:
+            arrays = _npz_arrays(z, where)
     names = ()
     if "names" in arrays:
         raw = arrays["names"]
@@ -217,6 +190,39 @@ def read_npz(path: Path) -> Trajectories:
         raise MetriplexError(f"{where}: {e}") from None
 
 
+def _npz_arrays(z, where: str) -> dict[str, np.ndarray]:
+    found = sorted(z.files)
+    missing = [k for k in ("trajectory", "t", "x") if k not in found]
+    if missing:
+        raise MetriplexError(
+            f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
+            f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
+        )
+    unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
+    if unknown:
+        raise MetriplexError(
+            f"{where} holds unknown array(s) {unknown}; the long table holds only "
+            "`trajectory`, `t`, `x` and `names`. If they are state variables, make them "
+            "columns of `x`; otherwise remove them."
+        )
+    arrays = {}
+    for k in found:
+        try:
+            arrays[k] = z[k]
+        except Exception as e:
+            if isinstance(e, ValueError) and "allow_pickle" in str(e):
+                raise MetriplexError(
+                    f"array `{k}` of {where} is stored as Python objects (pickle), which "
+                    "metriplex never loads because unpickling runs code. Save it as numbers, "
+                    "or names as strings: np.array(names, dtype=str)."
+                ) from None
+            raise MetriplexError(
+                f"array `{k}` of {where} is damaged ({type(e).__name__}: {e}); the file may be "
+                "truncated. Write it again."
+            ) from None
+    return arrays
+
+
 def read_csv(path: Path) -> Trajectories:
     """The long table from CSV: header ``trajectory,t,<name_1>,...``, one row per state."""
     path = Path(path)
@@ -224,7 +230,7 @@ def read_csv(path: Path) -> Trajectories:
     rows, lines = [], []
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            reader = csv.reader(f)
+            reader = csv.reader(f, strict=True)
             for r in reader:
                 if r and any(c.strip() for c in r):
                     rows.append(r)
@@ -235,7 +241,9 @@ def read_csv(path: Path) -> Trajectories:
             "another format. Save it as UTF-8 CSV."
         ) from None
     except csv.Error as e:
-        raise MetriplexError(f"{where} is not valid CSV ({e}). Save it again as plain CSV.") from None
+        raise MetriplexError(
+            f"{where} is not valid CSV ({e}); it may be truncated. Save it again as plain CSV."
+        ) from None
     if not rows:
         raise MetriplexError(f"{where} is empty; it holds no header and no rows.")
     header = [c.strip() for c in rows[0]]
