@@ -5,6 +5,7 @@
 
 __version__ = "0.1.0"
 
+from . import diagnostics as diagnostics
 from . import structure as structure
 from ._errors import MetriplexError as MetriplexError
 from ._errors import RolloutFailure as RolloutFailure
@@ -13,6 +14,7 @@ from ._model import GenericModel as GenericModel
 from ._model import Terms as Terms
 from .data import Pairs as Pairs
 from .data import Trajectories as Trajectories
+from .diagnostics import evaluate as evaluate
 from .integrate import RK4 as RK4
 from .integrate import AbstractScheme as AbstractScheme
 from .integrate import CrankNicolson as CrankNicolson

@@ -1,0 +1,86 @@
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex.losses import Batch
+from helpers import damped_oscillator, make_data, oscillator_x0, rigid_body, rigid_x0
+
+
+def _batch(data):
+    p = data.pairs()
+    return Batch(jnp.asarray(p.x0), jnp.asarray(p.x1), jnp.asarray(p.dt), jnp.ones(data.n))
+
+
+@pytest.mark.parametrize("system,x0", [(rigid_body, rigid_x0(3)), (damped_oscillator, oscillator_x0(3))])
+def test_loss_is_zero_on_data_made_by_the_same_scheme(system, x0):
+    model = system()
+    data = make_data(model, x0, 0.1, 50)
+    loss = mx.CrankNicolsonResidual() + 10.0 * mx.DegeneracyPenalty() + mx.JacobiPenalty("exact")
+    total, parts = loss(model, _batch(data))
+    assert float(total) < 1e-20, parts
+    # ... and clearly not zero for another scheme's residual on the same data
+    total_mid, _ = mx.MidpointResidual().as_loss()(model, _batch(data))
+    assert float(total_mid) > 1e3 * max(float(total), 1e-30)
+
+
+def test_loss_with_nonuniform_dt():
+    model = damped_oscillator()
+    ts = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.02, 0.2, 40)])
+    xs = mx.simulate(model, jnp.asarray(oscillator_x0(2)), jnp.asarray(ts))
+    data = mx.Trajectories.from_arrays(ts, np.asarray(xs))
+    total, _ = mx.CrankNicolsonResidual().as_loss()(model, _batch(data))
+    assert float(total) < 1e-20
+
+
+def test_loss_composition_and_weights():
+    loss = 2.0 * mx.CrankNicolsonResidual() + 3.0 * mx.DegeneracyPenalty()
+    assert loss.names == ("residual", "degeneracy_L", "degeneracy_M")
+    assert loss.weights == (2.0, 3.0, 3.0)
+    with pytest.raises(mx.MetriplexError, match="loss weights must be >= 0"):
+        -1.0 * mx.CrankNicolsonResidual()
+    with pytest.raises(mx.MetriplexError, match="estimator must be 'exact' or 'stochastic'"):
+        mx.JacobiPenalty("approximate")
+
+
+def test_degeneracy_penalty_detects_violation():
+    k = jr.split(jr.key(0), 4)
+    model = mx.GenericModel(mx.MLPPotential(3, width=8, key=k[0]),
+                            mx.MLPPotential(3, width=8, key=k[1]),
+                            mx.SkewMLPPoisson(3, width=8, key=k[2]),
+                            mx.CholeskyFriction(3, width=8, key=k[3]))
+    data = make_data(damped_oscillator(), oscillator_x0(2), 0.1, 10)
+    _, parts = mx.DegeneracyPenalty()(model, _batch(data))
+    assert float(parts["degeneracy_L"]) > 1e-8 and float(parts["degeneracy_M"]) > 1e-10
+
+
+def test_stochastic_jacobi_is_unbiased():
+    model = mx.GenericModel(mx.ZeroPotential(), mx.ZeroPotential(),
+                            mx.SkewMLPPoisson(5, width=16, key=jr.key(2)), mx.ZeroFriction(5))
+    x = jr.normal(jr.key(1), (4, 5))
+    b = Batch(x, x, jnp.ones(4), jnp.ones(5))
+    exact = float(mx.JacobiPenalty("exact")(model, b, None, jr.key(0)))
+    est = mx.JacobiPenalty("stochastic", probes=8)
+    draws = np.asarray(jax.jit(jax.vmap(lambda k: est(model, b, None, k)))(jr.split(jr.key(3), 200)))
+    se = draws.std(ddof=1) / np.sqrt(len(draws))
+    assert abs(draws.mean() - exact) < 4 * se, (draws.mean(), exact, se)
+    assert exact > 0
+
+
+def test_loss_is_differentiable_and_jittable():
+    import equinox as eqx
+
+    model = mx.GenericModel(mx.MLPPotential(3, width=8, key=jr.key(0)), mx.ZeroPotential(),
+                            mx.SkewMLPPoisson(3, width=8, key=jr.key(1)), mx.ZeroFriction(3))
+    data = make_data(rigid_body(), rigid_x0(2), 0.1, 10)
+    loss = mx.CrankNicolsonResidual() + mx.JacobiPenalty("stochastic", probes=2)
+
+    @eqx.filter_jit
+    def f(m, b, k):
+        return eqx.filter_value_and_grad(lambda mm: loss(mm, b, key=k)[0])(m)
+
+    v, g = f(model, _batch(data), jr.key(0))
+    assert np.isfinite(float(v))
+    assert all(np.all(np.isfinite(np.asarray(a))) for a in jax.tree_util.tree_leaves(g))

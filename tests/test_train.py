@@ -1,0 +1,124 @@
+"""Training: fit recovers known dynamics; validation is split by trajectory; resume; divergence."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import optax
+import pytest
+
+import metriplex as mx
+from helpers import damped_oscillator, make_data, oscillator_x0, rigid_body, rigid_x0
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rollout_error(model, data):
+    return mx.diagnostics.evaluate(model, data)["rollout_error_mean"]
+
+
+def test_fit_learns_damped_oscillator_far_better_than_untrained():
+    truth = damped_oscillator()
+    data = make_data(truth, oscillator_x0(24), 0.1, 40, names=("q", "p", "s"))
+    test = make_data(truth, oscillator_x0(3, seed=9), 0.1, 60, names=("q", "p", "s"))
+    k = jr.split(jr.key(0), 2)
+    model = mx.GenericModel(
+        mx.MLPPotential(3, width=32, data=data.x, key=k[0]),
+        mx.SumOf((2,)),
+        mx.CanonicalPoisson(3, 1),
+        mx.CholeskyFriction(3, width=32, key=k[1]),
+    )
+    before = _rollout_error(model, test)
+    loss = mx.CrankNicolsonResidual() + 10.0 * mx.FrictionDegeneracy()
+    trained, history = mx.fit(model, data, loss=loss, steps=2000, batch_size=256,
+                              learning_rate=1e-2, progress=False, key=jr.key(1))
+    after = _rollout_error(trained, test)
+    # A short budget on 24 short trajectories; longer training goes on improving (see README).
+    assert after < 0.05, after
+    assert after < before / 10, (before, after)
+    assert history.train["residual"][-1] < history.train["residual"][0] / 100
+    assert set(history.valid) >= {"residual", "degeneracy_M", "total"}
+    assert history.best_step > 0
+
+
+def test_validation_is_split_by_trajectory():
+    data = make_data(rigid_body(), rigid_x0(10), 0.1, 5)
+    train, valid = data.split(0.2, seed=0)
+    assert len(valid) == 2 and len(train) == 8
+    assert not set(train.ids) & set(valid.ids)
+    assert len(train.pairs()) + len(valid.pairs()) == len(data.pairs())
+
+
+def test_fit_rejects_bad_input():
+    model = mx.GenericModel(mx.MLPPotential(3, width=4, key=jr.key(0)), mx.ZeroPotential(),
+                            mx.SkewMLPPoisson(3, width=4, key=jr.key(1)), mx.ZeroFriction(3))
+    data = make_data(rigid_body(), rigid_x0(2), 0.1, 5)
+    wide = mx.Trajectories(data.trajectory, data.t, np.c_[data.x, data.x[:, :1]])
+    with pytest.raises(mx.MetriplexError, match="data have 4 state variables but the model expects 3"):
+        mx.fit(model, wide, steps=1, progress=False, key=jr.key(0))
+    with pytest.raises(mx.MetriplexError, match="every dt must be finite and > 0"):
+        p = data.pairs()
+        mx.fit(model, (p.x0, p.x1, -p.dt), steps=1, progress=False, key=jr.key(0))
+    with pytest.raises(mx.MetriplexError, match="need steps >= 0"):
+        mx.fit(model, data, steps=-1, progress=False, key=jr.key(0))
+
+
+def test_divergence_is_reported_and_best_model_kept():
+    truth = damped_oscillator()
+    data = make_data(truth, oscillator_x0(6), 0.1, 30)
+    model = mx.GenericModel(mx.MLPPotential(3, width=8, key=jr.key(0)), mx.SumOf((2,)),
+                            mx.CanonicalPoisson(3, 1), mx.CholeskyFriction(3, width=8, key=jr.key(1)))
+    with pytest.raises(mx.TrainingDiverged, match=r"training diverged at step \d+.*non-finite") as e:
+        mx.fit(model, data, optimizer=optax.sgd(1e12), steps=300, eval_every=10,
+               progress=False, key=jr.key(0))
+    best = e.value.model
+    assert best is not None
+    x = jnp.asarray(data.x[:5])
+    assert np.all(np.isfinite(np.asarray(jnp.stack([best.vector_field(xi) for xi in x]))))
+
+
+def _cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "metriplex", *args], capture_output=True,
+                          text=True, cwd=kw.get("cwd"), timeout=kw.get("timeout", 600))
+
+
+def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
+    mx.write(tmp_path / "d.npz", data)
+    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "3000", "--eval-every",
+            "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64",
+            "--quiet"]
+    full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts)
+    assert full.returncode == 0, full.stderr
+    proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
+                             "--out", str(tmp_path / "cut"), *opts],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ckpt = tmp_path / "cut" / "checkpoint.ckpt"
+    deadline = time.time() + 300
+    while time.time() < deadline:
+        if ckpt.exists() and ckpt.stat().st_size > 0:
+            time.sleep(1.0)
+            break
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not (tmp_path / "cut" / "model.mpx").exists(), "the run finished before the kill"
+    resumed = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume", *opts)
+    assert resumed.returncode == 0, resumed.stderr
+    a = mx.load(tmp_path / "full")
+    b = mx.load(tmp_path / "cut")
+    x = jnp.asarray(data.x[:10])
+    fa = np.asarray(jnp.stack([a.vector_field(xi) for xi in x]))
+    fb = np.asarray(jnp.stack([b.vector_field(xi) for xi in x]))
+    np.testing.assert_allclose(fa, fb, rtol=1e-9, atol=1e-12)
+    ha = json.loads((tmp_path / "full" / "history.json").read_text())
+    hb = json.loads((tmp_path / "cut" / "history.json").read_text())
+    assert ha["step"] == hb["step"]
+    np.testing.assert_allclose(ha["valid"]["total"], hb["valid"]["total"], rtol=1e-9)
