@@ -1,0 +1,167 @@
+"""What every ground-truth system offers: its model, variable names, sampling and settings."""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import functools
+import typing
+from typing import Any, ClassVar
+
+import numpy as np
+from jaxtyping import Float
+
+from .._errors import MetriplexError
+from .._model import GenericModel
+
+
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """Published (or, where stated in ``source``, our) data settings of a reference experiment.
+
+    ``steps`` time steps of size ``dt`` give ``steps + 1`` recorded states per trajectory.
+    """
+
+    dt: float
+    steps: int
+    trajectories: int
+    source: str = ""
+
+    @property
+    def horizon(self) -> float:
+        return self.dt * self.steps
+
+
+@dataclasses.dataclass(frozen=True)
+class System(abc.ABC):
+    """A ground-truth GENERIC system: a :class:`~metriplex.GenericModel` with analytic
+    :math:`E, S, L, M`, the names of its variables and how its initial states are drawn.
+
+    Concrete systems are frozen dataclasses holding one typed, frozen ``config``; use
+    :meth:`with_params` (or :func:`metriplex.systems.get_system`) for other parameters.
+    """
+
+    name: ClassVar[str]
+    description: ClassVar[str]
+
+    config: Any
+
+    @property
+    @abc.abstractmethod
+    def max_substep(self) -> float:
+        """Largest inner step that :func:`~metriplex.systems.generate` takes by default."""
+
+    @property
+    @abc.abstractmethod
+    def names(self) -> tuple[str, ...]:
+        """The state variables, in order."""
+
+    @functools.cached_property
+    def model(self) -> GenericModel:
+        """The analytic GENERIC model (built once per system)."""
+        return self._build_model()
+
+    @abc.abstractmethod
+    def _build_model(self) -> GenericModel: ...
+
+    @property
+    def n(self) -> int:
+        return len(self.names)
+
+    @property
+    @abc.abstractmethod
+    def defaults(self) -> Settings:
+        """Published data settings (``dt``, ``steps``, ``trajectories``)."""
+
+    @abc.abstractmethod
+    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num n"]:
+        """``num`` initial states drawn with ``numpy.random.default_rng(seed)``; float64."""
+
+    # -- parameters -----------------------------------------------------------------------------
+    def with_params(self, **params: Any) -> "System":
+        """This system with some ``config`` fields replaced (strings are parsed, for the CLI)."""
+        return type(self)(_replace_config(self.config, params, self.name))
+
+    def parameters(self) -> dict[str, Any]:
+        """The current parameters, by field name."""
+        return {f.name: getattr(self.config, f.name) for f in dataclasses.fields(self.config)}
+
+    def parameter_summary(self) -> str:
+        """One line ``name=value, ...`` of the current parameters."""
+        return ", ".join(f"{k}={_format(v)}" for k, v in self.parameters().items())
+
+    def help_text(self) -> str:
+        """Description, parameters and published settings, for ``metriplex simulate --help``."""
+        d = self.defaults
+        return (
+            f"{self.name}: {self.description} Parameters: {self.parameter_summary()}. "
+            f"Published settings: dt={d.dt:.6g}, steps={d.steps}, trajectories={d.trajectories}."
+        )
+
+    def _check_num(self, num: int) -> None:
+        if int(num) != num or num < 1:
+            raise MetriplexError(
+                f"the number of initial states must be a positive integer; got {num!r}."
+            )
+
+
+def _format(v: Any) -> str:
+    if isinstance(v, tuple):
+        return "(" + ", ".join(_format(u) for u in v) + ")"
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def _sample_box(
+    center: tuple[float, ...], halfwidth: tuple[float, ...], num: int, seed: int
+) -> np.ndarray:
+    """``center + U(-1, 1) * halfwidth`` per component, shape ``(num, n)``."""
+    rng = np.random.default_rng(seed)
+    c = np.asarray(center, dtype=np.float64)
+    h = np.asarray(halfwidth, dtype=np.float64)
+    return c[None, :] + rng.uniform(-1.0, 1.0, size=(num, c.shape[0])) * h[None, :]
+
+
+def _replace_config(config: Any, params: dict[str, Any], system: str) -> Any:
+    fields = {f.name: f for f in dataclasses.fields(config)}
+    hints = typing.get_type_hints(type(config))
+    changes = {}
+    for key, value in params.items():
+        if key not in fields:
+            raise MetriplexError(
+                f"system {system!r} has no parameter {key!r}; its parameters are "
+                f"{sorted(fields)}."
+            )
+        changes[key] = _coerce(value, hints[key], key, getattr(config, key))
+    return dataclasses.replace(config, **changes)
+
+
+def _coerce(value: Any, hint: Any, key: str, current: Any) -> Any:
+    """Turn ``value`` (possibly a CLI string like ``"10,20,40"``) into the field's type."""
+    try:
+        if typing.get_origin(hint) is tuple:
+            if isinstance(value, str):
+                value = [v for v in value.strip("()[] ").split(",") if v.strip()]
+            out = tuple(float(v) for v in value)
+            if len(out) != len(current):
+                raise ValueError(f"expected {len(current)} numbers")
+            return out
+        if hint is float:
+            return float(value)
+        if hint is int:
+            return int(value)
+        if hint is str:
+            return str(value)
+    except (TypeError, ValueError) as err:
+        raise MetriplexError(
+            f"parameter {key!r} must be {_describe(hint, current)}; got {value!r} ({err}). "
+            f"Example: {key}={_format(current)}."
+        ) from None
+    return value
+
+
+def _describe(hint: Any, current: Any) -> str:
+    if typing.get_origin(hint) is tuple:
+        return f"{len(current)} comma-separated numbers"
+    return {float: "a number", int: "an integer", str: "a name"}.get(hint, str(hint))

@@ -1,0 +1,136 @@
+"""Ground-truth trajectories of a built-in system."""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._errors import MetriplexError, RolloutFailure
+from ..data import Trajectories
+from ..integrate import RK4, AbstractScheme, solve
+from ._base import System
+from ._registry import get_system
+from .pendulum import PendulumEnergetic, PendulumTemperature
+
+
+class Substeps(AbstractScheme):
+    """Advance with ``count`` steps of ``inner`` of size ``dt / count`` per recorded step."""
+
+    name: ClassVar[str] = "substeps"
+    inner: AbstractScheme
+    count: int = eqx.field(static=True)
+
+    def step(self, model, x, dt, guess):
+        h = dt / self.count
+        int_dtype = jnp.asarray(0).dtype
+
+        def body(_, carry):
+            y, dy, ok, its = carry
+            y1, ok1, its1 = self.inner.step(model, y, h, y + dy)
+            return y1, y1 - y, ok & ok1, its + jnp.asarray(its1, int_dtype)
+
+        init = (x, (guess - x) / self.count, jnp.asarray(True), jnp.zeros((), int_dtype))
+        y, _, ok, its = jax.lax.fori_loop(0, self.count, body, init)
+        return y, ok, its
+
+    def residual(self, model, x0, x1, dt, terms0, terms1):
+        return (x1 - self.step(model, x0, dt, x0)[0]) / dt
+
+
+def generate(
+    system: System | str,
+    *,
+    trajectories: int | None = None,
+    steps: int | None = None,
+    dt: float | None = None,
+    seed: int = 0,
+    substeps: int | None = None,
+    scheme: AbstractScheme | None = None,
+    x0: Float[Array, "trajectories n"] | None = None,
+) -> Trajectories:
+    r"""Ground-truth trajectories: ``trajectories`` initial states from
+    ``system.sample_initial(trajectories, seed=seed)``, each recorded at
+    :math:`t_k = k\,\Delta t`, :math:`k = 0..` ``steps``.
+
+    Arguments left ``None`` take the system's published settings (``system.defaults``).
+
+    Each recorded step is ``substeps`` steps of ``scheme`` (default: classical RK4,
+    ``substeps = ceil(dt / system.max_substep)``), run by :func:`metriplex.solve` (batched,
+    jitted) in JAX's default float type (float64 when x64 is enabled). With :math:`S` linear in
+    the state, every Runge–Kutta step with positive weights keeps :math:`\Delta S \ge 0`:
+    :math:`\Delta S = h\sum_i b_i\,\nabla S\cdot f(X_i)` and :math:`\nabla S\cdot f \ge 0`
+    everywhere. The temperature pendulum is integrated in :math:`(q, p, s)` (where this holds)
+    and mapped to :math:`(q, p, \theta)`.
+
+    Measured maximum error against SciPy DOP853 (rtol 1e-12, atol 1e-12), float64, default
+    substeps, 4 trajectories over the published horizon (``tests/test_systems.py``):
+
+    ==========================  ==================================
+    system                      max abs error (state max ~)
+    ==========================  ==================================
+    rigid-body (200 steps)      see ``_MEASURED``
+    ==========================  ==================================
+
+    Pass ``scheme=metriplex.CrankNicolson(), substeps=1`` for data made by exactly the scheme
+    that a Crank–Nicolson-trained model rolls out with.
+
+    ```python
+    data = generate("pendulum-energetic", trajectories=100, steps=400, dt=0.1, seed=0)
+    ```
+    """
+    system = get_system(system) if isinstance(system, str) else system
+    d = system.defaults
+    trajectories = d.trajectories if trajectories is None else trajectories
+    steps = d.steps if steps is None else steps
+    dt = d.dt if dt is None else dt
+    if int(steps) != steps or steps < 1:
+        raise MetriplexError(f"`steps` must be a positive integer; got {steps!r}.")
+    if not (isinstance(dt, (int, float)) and math.isfinite(dt) and dt > 0.0):
+        raise MetriplexError(f"`dt` must be a positive finite number; got {dt!r}.")
+    if substeps is None:
+        substeps = max(1, math.ceil(dt / system.max_substep - 1e-9))
+    if int(substeps) != substeps or substeps < 1:
+        raise MetriplexError(f"`substeps` must be a positive integer; got {substeps!r}.")
+    if x0 is None:
+        if int(trajectories) != trajectories or trajectories < 1:
+            raise MetriplexError(
+                f"`trajectories` must be a positive integer; got {trajectories!r}."
+            )
+        x0 = system.sample_initial(int(trajectories), seed=seed)
+    x0 = np.asarray(x0, dtype=np.float64)
+    if x0.ndim != 2 or x0.shape[1] != system.n:
+        raise MetriplexError(
+            f"x0 must have shape (trajectories, {system.n}) for {system.name!r}; got {x0.shape}."
+        )
+
+    integrated = system
+    if isinstance(system, PendulumTemperature):
+        integrated = PendulumEnergetic(system.config)
+        x0 = np.asarray(system.to_entropy(jnp.asarray(x0)), dtype=np.float64)
+    dtype = jnp.zeros(()).dtype  # float64 when x64 is enabled, else float32
+    ts = jnp.arange(steps + 1, dtype=dtype) * jnp.asarray(dt, dtype)
+    inner = RK4() if scheme is None else scheme
+    stepper = inner if substeps == 1 else Substeps(inner, int(substeps))
+    out = solve(integrated.model, jnp.asarray(x0, dtype), ts, scheme=stepper)
+    failed = np.asarray(out.failed_step)
+    if np.any(failed >= 0):
+        b = int(np.argmax(failed >= 0))
+        k = int(failed[b])
+        raise RolloutFailure(
+            f"ground-truth step {k} (t={float(ts[k]):.6g}) of trajectory {b} of {system.name!r} "
+            f"did not converge or left the finite range; try more substeps (got {substeps}) or "
+            "a smaller dt.",
+            partial=np.asarray(out.xs[b, :k]),
+            trajectory=b,
+            time=float(ts[k]),
+        )
+    xs = out.xs
+    if integrated is not system:
+        xs = system.from_entropy(xs)
+    return Trajectories.from_arrays(np.asarray(ts, np.float64), np.asarray(xs, np.float64), system.names)
