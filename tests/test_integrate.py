@@ -1,0 +1,202 @@
+"""Time stepping: orders of convergence, failure reporting, ragged grids, batching.
+
+Each distinct (model, scheme, shape) compiles once (seconds), so the tests share models and
+array shapes, and fold several resolutions into one padded, ragged batch.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex.integrate import (
+    RK4,
+    SCHEMES,
+    CrankNicolson,
+    DiscreteGradient,
+    ImplicitMidpoint,
+    scheme_from_name,
+    simulate,
+    solve,
+)
+
+
+def _rotor_energy(x):
+    r2 = jnp.sum(x**2)
+    return 0.5 * r2 + 0.25 * r2**2
+
+
+#: A nonlinear oscillator with a closed-form solution: :math:`E = \tfrac12 r^2 + \tfrac14 r^4`,
+#: :math:`r^2 = q^2 + p^2`, canonical :math:`L`, so :math:`\dot q = (1 + r^2)p`,
+#: :math:`\dot p = -(1 + r^2)q`: a rotation at the amplitude-dependent rate
+#: :math:`\omega = 1 + r_0^2` (:func:`rotor_exact`).
+ROTOR = mx.GenericModel(
+    mx.Known(_rotor_energy), mx.ZeroPotential(), mx.CanonicalPoisson(2, 1), mx.ZeroFriction(2)
+)
+X_ROTOR = jnp.array([0.6, -0.3])
+
+
+def rotor_exact(x0, t):
+    x0 = np.asarray(x0, dtype=np.float64)
+    w = 1.0 + np.sum(x0**2)
+    c, s = np.cos(w * t), np.sin(w * t)
+    return np.array([c * x0[0] + s * x0[1], -s * x0[0] + c * x0[1]])
+
+
+def _cube(x):
+    return x[0] ** 3 / 3.0
+
+
+def _one(x):
+    return jnp.ones((1, 1), x.dtype)
+
+
+#: :math:`\dot x = x^2` as GENERIC (:math:`S = x^3/3`, :math:`M = 1`), with the solution
+#: :math:`x_0/(1 - x_0 t)`. An implicit step of size :math:`\Delta t` from :math:`x` has no real
+#: solution once :math:`\Delta t\,x` is large (for CN: :math:`2\Delta t x + \Delta t^2x^2 > 1`),
+#: so Newton cannot converge.
+BLOW_UP = mx.GenericModel(
+    mx.ZeroPotential(), mx.Known(_cube), mx.ZeroPoisson(1), mx.KnownFriction(_one)
+)
+TS_BLOW_UP = jnp.array([0.0, 0.5, 1.0, 8.0, 8.5])
+
+
+def _padded_grids(horizon, steps):
+    """One row per resolution, each padded to the finest with repeated final times."""
+    width = max(steps) + 1
+    rows = [np.concatenate([np.linspace(0.0, horizon, k + 1), np.full(width - k - 1, horizon)])
+            for k in steps]
+    return jnp.asarray(np.stack(rows))
+
+
+@pytest.mark.parametrize(
+    "scheme, order",
+    [(CrankNicolson(), 2), (ImplicitMidpoint(), 2), (RK4(), 4), (DiscreteGradient(), 2)],
+    ids=["cn", "midpoint", "rk4", "discrete-gradient"],
+)
+def test_order_of_convergence(scheme, order):
+    horizon, steps = 2.0, [20, 40, 80, 160]
+    ts = _padded_grids(horizon, steps)
+    out = solve(ROTOR, jnp.broadcast_to(X_ROTOR, (len(steps), 2)), ts, scheme=scheme)
+    assert out.ok
+    xs = np.asarray(out.xs)
+    exact = rotor_exact(X_ROTOR, horizon)
+    errors = np.linalg.norm(xs[:, -1] - exact[None, :], axis=-1)
+    slope = np.polyfit(np.log(horizon / np.asarray(steps)), np.log(errors), 1)[0]
+    assert abs(slope - order) < 0.15, (slope, errors)
+    if scheme.name in ("midpoint", "discrete-gradient"):
+        # Both keep this energy (a function of the quadratic invariant r^2) exactly.
+        E = np.asarray(jax.vmap(jax.vmap(_rotor_energy))(out.xs))
+        assert np.max(np.abs(E - E[:, :1])) < 1e-13 * E[0, 0]
+
+
+@pytest.mark.parametrize("scheme", [CrankNicolson(), DiscreteGradient()], ids=lambda s: s.name)
+def test_failed_step_is_reported_not_silent_nan(scheme):
+    x0 = jnp.array([[0.1], [0.01]])  # the first has no implicit step 1.0 -> 8.0, the second has
+    out = solve(BLOW_UP, x0, TS_BLOW_UP, scheme=scheme)
+    assert np.asarray(out.failed_step).tolist() == [3, -1]
+    assert not out.ok
+    xs = np.asarray(out.xs)
+    assert np.all(np.isfinite(xs[0, :3])) and np.all(np.isnan(xs[0, 3:]))
+    its = np.asarray(out.iterations)
+    assert its[0, 3] == scheme.max_steps  # it tried
+    assert np.all(its[0, 4:] == 0)  # and then stopped trying
+    # The failed trajectory does not hold back the other one.
+    assert np.all(np.isfinite(xs[1]))
+    exact = 0.01 / (1.0 - 0.01 * np.asarray(TS_BLOW_UP))
+    np.testing.assert_allclose(xs[1, :, 0], exact, rtol=1e-3)
+
+
+def test_simulate_raises_with_partial_states():
+    x0 = jnp.array([[0.01], [0.1]])
+    with pytest.raises(mx.RolloutFailure, match=r"from t=1 to t=8 of trajectory 1 did not") as err:
+        simulate(BLOW_UP, x0, TS_BLOW_UP)
+    assert err.value.trajectory == 1
+    assert err.value.time == 8.0
+    partial = np.asarray(err.value.partial)
+    assert partial.shape == (3, 1) and np.all(np.isfinite(partial))
+    assert partial[0, 0] == 0.1
+
+
+def test_rk4_blow_up_is_reported():
+    ts = jnp.array([0.0, 0.5, 1.0, 100.0, 1.0e4])
+    out = solve(BLOW_UP, jnp.array([1.0]), ts, scheme=RK4())
+    # x(t) = 1/(1 - t) blows up at t = 1, which RK4 does not notice; its states stay finite
+    # (about 1e45 at t = 100) until the last step overflows.
+    assert int(out.failed_step) == 4
+    assert np.all(np.isfinite(np.asarray(out.xs)[:4]))
+    assert np.all(np.isnan(np.asarray(out.xs)[4]))
+
+
+@pytest.mark.parametrize("scheme", [CrankNicolson(), RK4()], ids=lambda s: s.name)
+def test_zero_steps_keep_the_state_and_ragged_grids_match(scheme):
+    grids = jnp.array(
+        [
+            [0.0, 0.1, 0.25, 0.3, 0.35, 0.4],  # reference, no zero step
+            [0.0, 0.1, 0.25, 0.3, 0.3, 0.3],  # padded at the end (ragged batch)
+            [0.0, 0.1, 0.1, 0.25, 0.3, 0.3],  # a repeated time in the middle
+        ]
+    )
+    out = solve(ROTOR, jnp.broadcast_to(X_ROTOR, (3, 2)), grids, scheme=scheme)
+    assert out.ok
+    xs = np.asarray(out.xs)
+    ref = xs[0, :4]
+    np.testing.assert_allclose(xs[1, :4], ref, rtol=0.0, atol=1e-14)
+    assert np.all(xs[1, 4:] == xs[1, 3])
+    np.testing.assert_allclose(xs[2, [0, 1, 3, 4]], ref, rtol=0.0, atol=1e-14)
+    assert np.all(xs[2, 2] == xs[2, 1]) and np.all(xs[2, 5] == xs[2, 4])
+    if scheme.name != "rk4":
+        its = np.asarray(out.iterations)
+        assert its[1, 4] <= 1 and its[2, 2] <= 1  # a zero step needs no real Newton work
+
+
+def test_batched_equals_one_by_one_and_newton_stays_short():
+    x0 = jnp.array([[0.6, -0.3], [0.1, 0.2], [-0.4, 0.0]])
+    ts = jnp.stack([jnp.linspace(0.0, 3.0, 31), jnp.linspace(0.0, 1.0, 31),
+                    jnp.concatenate([jnp.linspace(0.0, 2.0, 21), jnp.full((10,), 2.0)])])
+    batched = solve(ROTOR, x0, ts)
+    assert np.asarray(batched.xs).shape == (3, 31, 2)
+    for b in range(3):
+        one = solve(ROTOR, x0[b], ts[b])
+        np.testing.assert_allclose(np.asarray(batched.xs[b]), np.asarray(one.xs),
+                                   rtol=1e-12, atol=1e-14)
+        np.testing.assert_array_equal(np.asarray(batched.iterations[b]),
+                                      np.asarray(one.iterations))
+    # A shared grid broadcasts over the batch.
+    shared = solve(ROTOR, x0, ts[0])
+    np.testing.assert_allclose(np.asarray(shared.xs[1]), np.asarray(solve(ROTOR, x0[1], ts[0]).xs),
+                               rtol=1e-12, atol=1e-14)
+    # Newton starts from the quadratic through the last three states (error O(dt^3)): after
+    # two steps, at dt = 1/30, one update plus Optimistix's confirming iteration suffice.
+    its = np.asarray(batched.iterations)
+    assert np.all(its[1, 3:] <= 2), its
+
+
+def test_float32_rollout_keeps_its_dtype():
+    x0 = X_ROTOR.astype(jnp.float32)
+    ts = jnp.linspace(0.0, 1.0, 11, dtype=jnp.float32)
+    for scheme in (CrankNicolson(), DiscreteGradient()):
+        out = solve(ROTOR, x0, ts, scheme=scheme)
+        assert out.ok and out.xs.dtype == jnp.float32
+        np.testing.assert_allclose(np.asarray(out.xs[-1]), rotor_exact(X_ROTOR, 1.0), atol=5e-3)
+
+
+def test_scheme_names():
+    assert set(SCHEMES) >= {"cn", "midpoint", "discrete-gradient", "rk4"}
+    for name, cls in SCHEMES.items():
+        scheme = scheme_from_name(name)
+        assert scheme.name == name and isinstance(scheme, cls)
+    with pytest.raises(mx.MetriplexError, match="unknown time-stepping scheme 'euler'"):
+        scheme_from_name("euler")
+
+
+def test_bad_inputs_are_explained():
+    with pytest.raises(mx.MetriplexError, match="non-decreasing"):
+        solve(ROTOR, X_ROTOR, jnp.array([0.0, 0.2, 0.1]))
+    with pytest.raises(mx.MetriplexError, match="model expects 2"):
+        solve(ROTOR, jnp.zeros(3), jnp.array([0.0, 0.1]))
+    with pytest.raises(mx.MetriplexError, match="finite"):
+        solve(ROTOR, jnp.array([jnp.nan, 0.0]), jnp.array([0.0, 0.1]))
+    with pytest.raises(mx.MetriplexError, match="2 grids for 3 initial states"):
+        solve(ROTOR, jnp.zeros((3, 2)), jnp.zeros((2, 4)))
