@@ -142,7 +142,8 @@ def cmd_rollout(args) -> None:
     data = read(args.data)
     check_names(args.run, data)
     result, _, lengths = rollout_data(model, data, scheme=scheme_from_name(args.scheme))
-    ts, xs = np.asarray(result.ts), np.asarray(result.xs)
+    ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
+    xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
     pieces = []
     for k, T in enumerate(lengths):

@@ -42,8 +42,9 @@ def _dtype(model):
     return leaves[0].dtype if leaves else jnp.zeros(()).dtype
 
 
-def _potential_along(fn, xs):
-    return np.asarray(jax.vmap(jax.vmap(fn))(jnp.asarray(xs)), dtype=np.float64)
+def _potential_along(model, fn, xs):
+    xs = jnp.asarray(xs, _dtype(model))
+    return np.asarray(jax.vmap(jax.vmap(fn))(xs), dtype=np.float64)
 
 
 def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256) -> dict:
@@ -134,10 +135,10 @@ def evaluate(
             per_traj_h.append(
                 float(np.linalg.norm(p[m] - o[m]) / max(np.linalg.norm(o[m]), _TINY))
             )
-    E = _potential_along(model.energy, np.nan_to_num(pred))
-    S = _potential_along(model.entropy, np.nan_to_num(pred))
+    E = _potential_along(model, model.energy, np.nan_to_num(pred))
+    S = _potential_along(model, model.entropy, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac = [], [], [], []
-    E_data = _potential_along(model.energy, xs)
+    E_data = _potential_along(model, model.energy, xs)
     spread = float(np.ptp(np.concatenate([E_data[k, :T] for k, T in enumerate(lengths)])))
     for k, T in enumerate(lengths):
         if failed[k] >= 0:

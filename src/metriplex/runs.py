@@ -163,8 +163,9 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
                       t=ts, learned=pred, observed=obs, names=np.array(names))
     err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
     plots.save_figure(plots.error_over_time(ts, err), folder / "error", t=ts, error=err)
-    E = np.asarray(jax.vmap(model.energy)(jnp.nan_to_num(jnp.asarray(pred))))
-    S = np.asarray(jax.vmap(model.entropy)(jnp.nan_to_num(jnp.asarray(pred))))
+    xp = jnp.nan_to_num(jnp.asarray(pred))
+    E = np.asarray(jax.vmap(model.energy)(xp))
+    S = np.asarray(jax.vmap(model.entropy)(xp))
     plots.save_figure(plots.energy_entropy(ts, E, S), folder / "energy_entropy", t=ts,
                       energy=E, entropy=S)
 

@@ -1,0 +1,164 @@
+"""The command line: bad input gets one clear message and exit status 2, no traceback, and no
+existing file is modified; the DESIGN.md §3 forms work end to end."""
+
+import contextlib
+import hashlib
+import io
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex.cli import main
+from helpers import damped_oscillator, make_data, oscillator_x0, rigid_body, rigid_x0
+
+
+def run(*args):
+    """Run the CLI in this process (fast); one test below also runs it as a real subprocess."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as e:  # argparse usage errors and --help
+            code = e.code
+    return subprocess.CompletedProcess(args, code, out.getvalue(), err.getvalue())
+
+
+def test_cli_as_a_subprocess(tmp_path):
+    res = subprocess.run([sys.executable, "-m", "metriplex", "train", str(tmp_path / "no.npz"),
+                          "--out", str(tmp_path / "r")], capture_output=True, text=True,
+                         timeout=300)
+    assert_clean_error(res, r"data file .*no.npz' does not exist")
+
+
+def digest(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def assert_clean_error(res, pattern):
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    assert "Traceback" not in res.stderr, res.stderr
+    import re
+
+    assert re.search(pattern, res.stderr), res.stderr
+
+
+@pytest.fixture(scope="module")
+def oscillator_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")
+    data = make_data(damped_oscillator(), oscillator_x0(10), 0.1, 40, names=("q", "p", "s"))
+    mx.write(tmp / "data.npz", data)
+    res = run("train", tmp / "data.npz", "--out", tmp / "run", "--entropy", "sum:2", "--poisson",
+              "canonical:1", "--friction", "neural", "--steps", "300", "--width", "16", "--quiet")
+    assert res.returncode == 0, res.stderr
+    return tmp
+
+
+def test_run_folder_contents(oscillator_run):
+    run_dir = oscillator_run / "run"
+    for name in ("model.mpx", "config.json", "history.json", "metrics.json", "checkpoint.ckpt",
+                 "figures/loss.png", "figures/loss.pdf", "figures/loss.npz",
+                 "figures/trajectories.png", "figures/energy_entropy.npz"):
+        assert (run_dir / name).exists(), name
+    cfg = json.loads((run_dir / "config.json").read_text())
+    assert cfg["names"] == ["q", "p", "s"] and cfg["config"]["poisson"] == "canonical:1"
+    assert set(cfg["train_trajectories"]).isdisjoint(cfg["validation_trajectories"])
+
+
+def test_rollout_and_evaluate(oscillator_run):
+    tmp = oscillator_run
+    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred.npz")
+    assert res.returncode == 0, res.stderr
+    pred, data = mx.read(tmp / "pred.npz"), mx.read(tmp / "data.npz")
+    assert pred.names == data.names and len(pred) == len(data)
+    np.testing.assert_array_equal(pred.t, data.t)
+    np.testing.assert_allclose(pred.x[pred.t == 0], data.x[data.t == 0], rtol=1e-6)
+    res = run("evaluate", tmp / "run", tmp / "data.npz", "--out", tmp / "metrics.json")
+    assert res.returncode == 0, res.stderr
+    m = json.loads((tmp / "metrics.json").read_text())
+    for key in ("rollout_error", "rollout_error_mean", "energy_relative_drift", "entropy_min_step",
+                "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual"):
+        assert key in m, key
+    assert len(m["rollout_error"]) == len(data)
+    # The output exists now: evaluate refuses to overwrite it.
+    before = digest(tmp)
+    res = run("evaluate", tmp / "run", tmp / "data.npz", "--out", tmp / "metrics.json")
+    assert_clean_error(res, r"exists; refusing to overwrite it\. Pass --overwrite")
+    assert digest(tmp) == before
+
+
+def test_train_refuses_to_overwrite_a_run(oscillator_run):
+    tmp = oscillator_run
+    before = digest(tmp / "run")
+    res = run("train", tmp / "data.npz", "--out", tmp / "run", "--steps", "10", "--quiet")
+    assert_clean_error(res, r"exists and is not empty; refusing to overwrite it")
+    assert digest(tmp / "run") == before
+
+
+@pytest.mark.parametrize(
+    "options,pattern",
+    [
+        (["--poisson", "canonical:6"], r"canonical:6 needs 2K <= n .* n=3 variables"),
+        (["--entropy", "sum:12"], r"indices must lie in \[0, 2\] .* got \[12\]"),
+        (["--entropy", "sum:a"], r"comma-separated integer indices"),
+        (["--friction", "learned"], r"--friction must be one of neural, zero; got 'learned'"),
+        (["--jacobi", "maybe"], r"--jacobi must be one of none, exact, stochastic"),
+        (["--lr", "-1"], r"--lr must be > 0; got -1"),
+        (["--validation", "1.5"], r"--validation must lie in \[0, 1\); got 1.5"),
+    ],
+)
+def test_structure_options_that_do_not_fit_the_data(oscillator_run, tmp_path, options, pattern):
+    res = run("train", oscillator_run / "data.npz", "--out", tmp_path / "r", *options, "--quiet")
+    assert_clean_error(res, pattern)
+    assert not (tmp_path / "r").exists() or not any((tmp_path / "r").iterdir())
+
+
+def test_bad_data_files(tmp_path):
+    (tmp_path / "empty.csv").write_text("")
+    res = run("train", tmp_path / "empty.csv", "--out", tmp_path / "r")
+    assert_clean_error(res, r"empty")
+    (tmp_path / "nan.csv").write_text("trajectory,t,q\n0,0.0,1.0\n0,0.1,nan\n")
+    assert_clean_error(run("train", tmp_path / "nan.csv", "--out", tmp_path / "r"), r"finite")
+    (tmp_path / "t.csv").write_text("trajectory,t,q\n0,0.0,1.0\n0,0.2,2.0\n0,0.1,1.0\n")
+    assert_clean_error(run("train", tmp_path / "t.csv", "--out", tmp_path / "r"),
+                       r"strictly increasing within each trajectory")
+    (tmp_path / "one.csv").write_text("trajectory,t,q\n0,0.0,1.0\n0,0.1,2.0\n1,0.0,1.0\n")
+    assert_clean_error(run("train", tmp_path / "one.csv", "--out", tmp_path / "r"),
+                       r"at least two samples.*trajectory 1 has 1")
+    assert_clean_error(run("train", tmp_path / "missing.npz", "--out", tmp_path / "r"),
+                       r"does not exist")
+
+
+def test_model_file_errors(oscillator_run, tmp_path):
+    tmp = oscillator_run
+    model = (tmp / "run" / "model.mpx").read_bytes()
+    (tmp_path / "cut").mkdir()
+    (tmp_path / "cut" / "model.mpx").write_bytes(model[: len(model) // 2])
+    res = run("evaluate", tmp_path / "cut", tmp / "data.npz")
+    assert_clean_error(res, r"truncated or corrupted")
+    (tmp_path / "old").mkdir()
+    head, _, rest = model.partition(b"\n")
+    header, _, body = rest.partition(b"\n")
+    h = json.loads(header)
+    h["format_version"] = 99
+    (tmp_path / "old" / "model.mpx").write_bytes(head + b"\n" + json.dumps(h).encode() + b"\n" + body)
+    assert_clean_error(run("evaluate", tmp_path / "old", tmp / "data.npz"),
+                       r"format version 99; this metriplex reads version 1")
+    assert_clean_error(run("evaluate", tmp_path / "nothing", tmp / "data.npz"), r"does not exist")
+    wide = make_data(rigid_body(), rigid_x0(2), 0.1, 5)
+    wide = mx.Trajectories(wide.trajectory, wide.t, np.c_[wide.x, wide.x])
+    mx.write(tmp_path / "wide.npz", wide)
+    assert_clean_error(run("evaluate", tmp / "run", tmp_path / "wide.npz"),
+                       r"data have 6 state variables but the model .* was trained on 3")
+
+
+def test_help_lists_commands():
+    res = run("--help")
+    assert res.returncode == 0
+    for cmd in ("simulate", "train", "rollout", "evaluate", "reproduce"):
+        assert cmd in res.stdout
