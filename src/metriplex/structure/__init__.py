@@ -3,10 +3,14 @@
 from .friction import AbstractFriction as AbstractFriction
 from .friction import CholeskyFriction as CholeskyFriction
 from .friction import KnownFriction as KnownFriction
+from .friction import ProjectedCholeskyFriction as ProjectedCholeskyFriction
 from .friction import ZeroFriction as ZeroFriction
 from .poisson import AbstractPoisson as AbstractPoisson
 from .poisson import CanonicalPoisson as CanonicalPoisson
+from .poisson import CasimirPoisson3 as CasimirPoisson3
+from .poisson import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .poisson import KnownPoisson as KnownPoisson
+from .poisson import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .poisson import SkewMLPPoisson as SkewMLPPoisson
 from .poisson import ZeroPoisson as ZeroPoisson
 from .potential import AbstractPotential as AbstractPotential

@@ -17,6 +17,7 @@ from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._mlp import FoldedHead, Hidden, standardise
 from ._registry import not_serialisable, register
+from .poisson import _check_eps, _default_eps, _projector_vectors
 from .scaling import Scaling
 
 
@@ -117,3 +118,83 @@ class KnownFriction(AbstractFriction):
 
     def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
         return self.fn(x)
+
+
+# -- exactly degenerate variant ----------------------------------------------------------------
+
+
+@register("friction", "projected-mlp")
+class ProjectedCholeskyFriction(AbstractFriction):
+    r"""Learned :math:`M` with :math:`M\nabla E = 0` by construction: :math:`M = F F^\top`,
+    :math:`F = Q B`.
+
+    :math:`B(x)` is the factor of a :class:`CholeskyFriction` (same network, same
+    normalisation, :math:`B = D\tilde B`) and :math:`Q` projects out the energy gradient
+    :math:`g = \nabla E` in physical coordinates,
+
+    .. math:: Q = I - \frac{D^2 g\,g^\top}{|Dg|^2 + \varepsilon^2},\qquad
+              F = B - \hat u\,(B^\top\hat g)^\top,
+
+    (:math:`\hat g = g/\sqrt s`, :math:`\hat u = D^2 g/\sqrt s`, :math:`s = |Dg|^2 +
+    \varepsilon^2`), i.e. :math:`M = D\tilde P\tilde B\tilde B^\top\tilde P D` with
+    :math:`\tilde P` the orthogonal projector against the standardised gradient :math:`Dg`.
+    :math:`M` is symmetric positive semi-definite for any weights (a Gram matrix).
+
+    Exactness: :math:`M\nabla E = F B^\top\nabla E\,\varepsilon^2/s`, below rounding wherever
+    :math:`|D\nabla E| > \sqrt{\text{machine eps}}` with the default :math:`\varepsilon` (machine
+    epsilon of the dtype); where :math:`\nabla E \to 0`, :math:`M \to BB^\top` smoothly (no NaN).
+    Then :math:`dE/dt = \nabla E^\top L\nabla E + (M\nabla E)^\top\nabla S = 0` to rounding.
+    """
+
+    base: CholeskyFriction
+    n: int = eqx.field(static=True)
+    eps: float | None = eqx.field(static=True)
+
+    def __init__(
+        self,
+        n: int,
+        *,
+        width: int = 64,
+        depth: int = 2,
+        activation: str = "softplus",
+        scaling: Scaling | None = None,
+        eps: float | None = None,
+        key,
+    ):
+        _check_eps(eps)
+        self.base = CholeskyFriction(
+            n, width=width, depth=depth, activation=activation, scaling=scaling, key=key
+        )
+        self.n = n
+        self.eps = None if eps is None else float(eps)
+
+    @property
+    def scaling(self) -> Scaling | None:
+        return self.base.scaling
+
+    def factor(self, x: State, grad_energy: State) -> Matrix:
+        B = self.base.factor(x)
+        s = self.base.scaling
+        g_hat, u_hat = _projector_vectors(
+            grad_energy, None if s is None else s.scale, _default_eps(self.eps, x.dtype)
+        )
+        return B - jnp.outer(u_hat, g_hat @ B)
+
+    def __call__(self, x: State, grad_energy: State) -> Matrix:
+        F = self.factor(x, grad_energy)
+        return F @ F.T
+
+    def spec(self):
+        return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls(
+            n,
+            width=spec["width"],
+            depth=spec["depth"],
+            activation=spec.get("activation", "softplus"),
+            scaling=Scaling.from_json(spec.get("scaling")),
+            eps=spec.get("eps"),
+            key=key,
+        )
