@@ -343,6 +343,15 @@ def test_csv_accepts_bom_spaces_and_blank_lines(tmp_path):
     assert data.names == ("q",) and data.x[:, 0].tolist() == [1.5, -2.0]
 
 
+def test_csv_slow_path_reads_what_the_fast_path_rejects(tmp_path):
+    """Quoted numbers and whitespace-only lines go the line-by-line way; the values agree."""
+    clean = tmp_path / "clean.csv"
+    clean.write_text("trajectory,t,q,p\n4,0.0,0.1,-2e-300\n4,0.5,1.0,3.0\n")
+    odd = tmp_path / "odd.csv"
+    odd.write_text('trajectory,t,q,p\n4,"0.0",0.1,-2e-300\n   \n4,0.5,"1.0",3.0\n')
+    _same(mx.read(odd), mx.read(clean))
+
+
 def test_csv_not_text(tmp_path):
     with pytest.raises(MetriplexError, match=r"not UTF-8 text.*Save it as UTF-8 CSV"):
         mx.read(_bytes(tmp_path, "b.csv", b"trajectory,t,q\n\xff\xfe\x00\x01"))

