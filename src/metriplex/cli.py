@@ -269,7 +269,9 @@ def _systems_help() -> str:
     try:
         from . import systems
 
-        return "Built-in systems:\n" + systems.describe()
+        return "Built-in systems:\n\n" + "\n\n".join(
+            s.help_text() for s in systems.SYSTEMS.values()
+        )
     except Exception:  # the listing must never break --help
         return "Generate trajectories of a built-in ground-truth system."
 
