@@ -425,6 +425,7 @@ Z0 = np.arange(24.0).reshape(2, 3, 4)
         ({"Z": Z0[:, :, :1], "dt": 1.0}, r"at least two samples.*trajectory 0 has 1"),
         ({"Z": Z0, "dt": 1.0, "names": np.array(["q", "p"], dtype=object)}, r"`names`.*lists 2 names \['q', 'p'\] but state array `Z` has 3 variables"),
         ({"Z": Z0, "dt": 1.0, "names": np.ones(3)}, r"`names`.*must be strings"),
+        ({"Z": Z0, "dt": 1.0, "names": ["a"], "labels": ["b"]}, r"several candidates for the variable names: \['names', 'labels'\]\. Rename or remove all but one"),
         ({"Z": Z0, "dt": 1.0, "trajectory_ids": [0, 1, 2]}, r"`trajectory_ids`.*has 3 entries; 2 are needed"),
         ({"trajectory": [0, 0], "t": [0.0, 1.0]}, r"read as the long table.*`x` is missing"),
         ({"trajectory": [0, 0, 0], "t": [0.0, 1.0, 2.0], "x": np.ones((2, 3))}, r"`x`.*is 2×3; with 3 rows in `trajectory` it must be 3×n.*transposed"),

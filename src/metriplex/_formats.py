@@ -314,7 +314,8 @@ def _read_hdf5(f, path: Path) -> Trajectories:
         ts.append(t)
         xs.append(x)
     if all(i is not None for i in ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
+        uniq, counts = np.unique(ids, return_counts=True)
+        dup = uniq[counts > 1].tolist()
         if dup:
             raise MetriplexError(
                 f"in {where}, several groups carry the same `trajectory` id attribute {dup}; "
@@ -617,8 +618,15 @@ def _mat_scope(variables: dict, path: Path, states: str | None) -> tuple[dict, s
     return variables, where
 
 
-def _pick(scope: dict, keys: Sequence[str], override: str | None, what: str, where: str):
-    """The one variable among ``keys`` present in ``scope`` (or ``override``), or None."""
+def _pick(
+    scope: dict, keys: Sequence[str], override: str | None, what: str, where: str,
+    option: str | None = None,
+):
+    """The one variable among ``keys`` present in ``scope`` (or ``override``), or None.
+
+    ``option`` is the read_mat keyword that names the variable, suggested when several are
+    present.
+    """
     if override is not None:
         if override not in scope:
             raise MetriplexError(
@@ -628,11 +636,11 @@ def _pick(scope: dict, keys: Sequence[str], override: str | None, what: str, whe
         return override
     present = [k for k in keys if k in scope and not isinstance(scope[k], dict)]
     if len(present) > 1:
-        raise MetriplexError(
-            f"{where} holds several candidates for {what}: {present}. Name the one to use, e.g. "
-            f"read_mat(path, {'states' if what.startswith('the state') else 'time'}="
-            f"{present[0]!r})."
+        fix = (
+            f"Name the one to use, e.g. read_mat(path, {option}={present[0]!r})."
+            if option else "Rename or remove all but one."
         )
+        raise MetriplexError(f"{where} holds several candidates for {what}: {present}. {fix}")
     return present[0] if present else None
 
 
@@ -642,7 +650,7 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
     names = _strings(scope[names_key], f"`{names_key}`", where) if names_key else []
     if states is None and "trajectory" in scope:
         return (*_mat_long_table(scope, where), names)
-    key = _pick(scope, STATE_KEYS, states, "the state array", where)
+    key = _pick(scope, STATE_KEYS, states, "the state array", where, "states")
     if key is None:
         raise MetriplexError(
             f"{where} holds no state array: expected a trajectories × variables × snapshots "
@@ -676,7 +684,7 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
 
 def _mat_times(scope, where, key, shape, *, time, dt):
     K, n, T = shape
-    t_key = _pick(scope, TIME_KEYS, time, "the time vector", where)
+    t_key = _pick(scope, TIME_KEYS, time, "the time vector", where, "time")
     step_key = _pick(scope, STEP_KEYS, None, "the time step", where)
     step = None
     if step_key is not None:
