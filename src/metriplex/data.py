@@ -105,8 +105,8 @@ class Trajectories:
                 k = int(np.flatnonzero(dt <= 0)[0])
                 raise MetriplexError(
                     f"`t` must be strictly increasing within each trajectory; trajectory {i} "
-                    f"has t[{k + 1}]={t[s + k + 1]!r} <= t[{k}]={t[s + k]!r}. Sort the samples "
-                    "by time, drop duplicates, or split the trajectory."
+                    f"has t[{k + 1}]={float(t[s + k + 1])!r} <= t[{k}]={float(t[s + k])!r}. Sort "
+                    "the samples by time, drop duplicates, or split the trajectory."
                 )
         object.__setattr__(self, "trajectory", traj)
         object.__setattr__(self, "t", t)
@@ -150,13 +150,17 @@ class Trajectories:
     def __len__(self) -> int:
         return len(self.ids)
 
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        # Rows are sorted by trajectory id (see __post_init__), so each is one slice.
+        _, starts, counts = np.unique(self.trajectory, return_index=True, return_counts=True)
+        return starts, counts
+
     def __iter__(self) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-        for i in self.ids:
-            m = self.trajectory == i
-            yield self.t[m], self.x[m]
+        for s, c in zip(*self._bounds()):
+            yield self.t[s : s + c], self.x[s : s + c]
 
     def lengths(self) -> np.ndarray:
-        return np.unique(self.trajectory, return_counts=True)[1]
+        return self._bounds()[1]
 
     def select(self, ids: Sequence[int]) -> "Trajectories":
         m = np.isin(self.trajectory, np.asarray(ids))

@@ -1,6 +1,7 @@
 """Reading and writing trajectories and model files.
 
-Trajectories use the long table of DESIGN.md §2 in NPZ (native) or CSV. Model files are a
+Trajectories use the long table of DESIGN.md §2 in NPZ (native) or CSV, and are also read from
+and written to HDF5 (one group per trajectory) and MATLAB ``.mat`` (see ``_formats``). Model files are a
 JSON header followed by ``equinox.tree_serialise_leaves`` bytes: loading reads numbers only and
 never executes code (no pickle). Every file is written atomically: to a temporary file in the
 same folder, then renamed, so an interrupted write never leaves a half-written file behind.
