@@ -53,6 +53,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")
     w.add_argument("--float64", action="store_true", default=None, help="train in float64")
+    w.add_argument("--data-parallel", action="store_true", default=None,
+                   help="split each batch over all local devices (GPUs, or CPU devices with "
+                   "XLA_FLAGS=--xla_force_host_platform_device_count=N)")
 
 
 def _config_from_args(args):

@@ -62,6 +62,7 @@ class RunConfig:
     seed: int = 0
     float64: bool = False
     checkpoint_every: int = 10
+    data_parallel: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

@@ -102,6 +102,7 @@ def train_run(
             checkpoint=str(out / "checkpoint.ckpt"),
             checkpoint_every=config.checkpoint_every,
             resume=resume,
+            data_parallel=config.data_parallel,
             key=fit_key,
         )
     except TrainingDiverged as e:

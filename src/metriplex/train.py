@@ -95,6 +95,30 @@ def _batch(pairs: Pairs, idx, scale, dtype) -> Batch:
     )
 
 
+def _batch_sharding(enabled: bool, batch_size: int):
+    """A function that shards a batch's sample axis over all local devices, or ``None``."""
+    if not enabled:
+        return None
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+    devices = jax.devices()
+    if batch_size % len(devices):
+        raise MetriplexError(
+            f"data-parallel training splits each batch over {len(devices)} devices, so the batch "
+            f"size must be a multiple of {len(devices)}; got {batch_size}. Choose "
+            f"--batch-size {batch_size - batch_size % len(devices) or len(devices)}."
+        )
+    mesh = Mesh(np.array(devices), ("data",))
+    rows = NamedSharding(mesh, P("data"))
+    whole = NamedSharding(mesh, P())
+
+    def shard(batch: Batch) -> Batch:
+        c = jax.lax.with_sharding_constraint
+        return Batch(c(batch.x0, rows), c(batch.x1, rows), c(batch.dt, rows), c(batch.scale, whole))
+
+    return shard
+
+
 def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
     """Adam with a short linear warm-up and cosine decay to 1% of the peak rate."""
     schedule = optax.warmup_cosine_decay_schedule(
@@ -126,6 +150,7 @@ def fit(
     checkpoint: str | None = None,
     checkpoint_every: int = 10,
     resume: bool = False,
+    data_parallel: bool = False,
     key,
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
@@ -153,6 +178,12 @@ def fit(
         on Ctrl-C and at the end: parameters, optimiser state, step, PRNG key, best model and
         history. With ``resume=True`` training continues from it and reaches the same result as
         an uninterrupted run with the same arguments.
+    data_parallel:
+        Split every minibatch over all local devices (``jax.devices()``) with JAX sharding:
+        parameters are replicated, the batch axis is sharded, and XLA inserts the gradient
+        all-reduce. The result equals single-device training to rounding. ``batch_size`` must be
+        a multiple of the device count. Across hosts, call ``jax.distributed.initialize()``
+        first (see docs/performance.md).
 
     ```python
     model, history = fit(model, data, steps=2000, key=jr.key(0))
@@ -193,6 +224,7 @@ def fit(
     opt_state = optimizer.init(params)
     n_train = len(train_pairs)
     bsz = min(batch_size, n_train)
+    shard = _batch_sharding(data_parallel, bsz)
     full_train = _batch(train_pairs, np.arange(n_train), scale, dtype)
 
     def loss_fn(p, batch, k):
@@ -205,6 +237,8 @@ def fit(
             kb, kl = jr.split(k)
             idx = jr.randint(kb, (bsz,), 0, n_train)
             batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx], full_train.scale)
+            if shard is not None:
+                batch = shard(batch)
             (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
             # Optax mixes int step counts with floats; keep it working under strict promotion.
             with jax.numpy_dtype_promotion("standard"):

@@ -1,0 +1,46 @@
+"""Data-parallel training over 2 simulated CPU devices equals single-device training."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent(
+    """
+    import os, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp, jax.random as jr, numpy as np
+    sys.path.insert(0, os.path.join(os.getcwd(), "tests"))
+    import metriplex as mx
+    from helpers import damped_oscillator, make_data, oscillator_x0
+    assert len(jax.devices()) == 2, jax.devices()
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 30)
+    def model():
+        k = jr.split(jr.key(0), 2)
+        return mx.GenericModel(mx.MLPPotential(3, width=16, key=k[0]), mx.SumOf((2,)),
+                               mx.CanonicalPoisson(3, 1), mx.CholeskyFriction(3, width=16, key=k[1]))
+    out = []
+    for parallel in (False, True):
+        m, h = mx.fit(model(), data, steps=200, batch_size=64, progress=False,
+                      data_parallel=parallel, key=jr.key(1))
+        out.append((np.asarray(jax.vmap(m.vector_field)(jnp.asarray(data.x[:20]))), h.valid["total"]))
+    np.testing.assert_allclose(out[0][0], out[1][0], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(out[0][1], out[1][1], rtol=1e-8)
+    try:
+        mx.fit(model(), data, steps=1, batch_size=63, progress=False, data_parallel=True, key=jr.key(1))
+    except mx.MetriplexError as e:
+        assert "must be a multiple of 2; got 63" in str(e), e
+    else:
+        raise AssertionError("odd batch accepted")
+    print("OK")
+    """
+)
+
+
+def test_two_cpu_devices_match_one(tmp_path):
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",
+               JAX_PLATFORMS="cpu")
+    res = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env,
+                         cwd=os.path.dirname(os.path.dirname(__file__)), timeout=600)
+    assert res.returncode == 0 and "OK" in res.stdout, res.stderr[-3000:]
