@@ -21,6 +21,7 @@ In temperature variables :math:`x' = (q, p, \theta)`, with :math:`J = \partial x
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -191,9 +192,7 @@ def entropy_to_temperature(
     r"""Map states :math:`(q, p, s) \mapsto (q, p, \theta)`,
     :math:`\theta_i = \theta_{\rm ref}\exp((s_i - \beta_i a_i)/c_{0i})`. Any leading batch axes."""
     x = jnp.asarray(x)
-    flat = x.reshape(-1, 10)
-    th = jax.vmap(lambda y: _temperatures(config, y))(flat)
-    return jnp.concatenate([flat[:, 0:8], th], axis=1).reshape(x.shape)
+    return _map_states(_to_temperature, config, x.reshape(-1, 10)).reshape(x.shape)
 
 
 def temperature_to_entropy(
@@ -202,13 +201,22 @@ def temperature_to_entropy(
     r"""Map states :math:`(q, p, \theta) \mapsto (q, p, s)`,
     :math:`s_i = \beta_i a_i + c_{0i}\log(\theta_i/\theta_{\rm ref})`. Any leading batch axes."""
     x = jnp.asarray(x)
-    flat = x.reshape(-1, 10)
-    def one(y):
-        a = _strains(config, y[0:4])
-        beta, c0 = _arr(config.beta, y), _arr(config.heat_capacity, y)
-        return jnp.concatenate([y[0:8], beta * a + c0 * jnp.log(y[8:10] / config.theta_ref)])
+    return _map_states(_to_entropy, config, x.reshape(-1, 10)).reshape(x.shape)
 
-    return jax.vmap(one)(flat).reshape(x.shape)
+
+def _to_temperature(config: PendulumConfig, y: State) -> State:
+    return jnp.concatenate([y[0:8], _temperatures(config, y)])
+
+
+def _to_entropy(config: PendulumConfig, y: State) -> State:
+    a = _strains(config, y[0:4])
+    beta, c0 = _arr(config.beta, y), _arr(config.heat_capacity, y)
+    return jnp.concatenate([y[0:8], beta * a + c0 * jnp.log(y[8:10] / config.theta_ref)])
+
+
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _map_states(fn, config: PendulumConfig, flat: Float[Array, "batch 10"]):
+    return jax.vmap(lambda y: fn(config, y))(flat)
 
 
 _Q_P_NAMES = ("q1x", "q1y", "q2x", "q2y", "p1x", "p1y", "p2x", "p2y")

@@ -83,7 +83,10 @@ class RigidBody(System):
     """
 
     name = "rigid-body"
-    description = "Free rigid body (Euler's equations), Lie-Poisson L(m) = -eps m, E = sum m_i^2/(2 I_i)."
+    description = (
+        "Free rigid body (Euler's equations): Lie-Poisson L(m) = -eps m, "
+        "E = sum m_i^2/(2 I_i), S = 0, M = 0."
+    )
     config: RigidBodyConfig = RigidBodyConfig()
 
     @property
