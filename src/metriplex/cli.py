@@ -177,17 +177,22 @@ def cmd_evaluate(args) -> None:
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=args.scheme, figures=figures, horizon=args.horizon)
-    try:
+    if not args.no_verdict:
+        from .runs import run_config
         from .verdict import verdict
-    except ImportError:
-        pass
-    else:
-        metrics["verdict"] = verdict(model, data, metrics)
+
+        cfg = run_config(args.run).get("config", {})
+        metrics["verdict"] = verdict(
+            model, data, width=cfg.get("width", 64), depth=cfg.get("depth", 2),
+            steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
+            batch_size=cfg.get("batch_size", 256), progress=False,
+        )
+        print(metrics["verdict"]["statement"], file=sys.stderr)
     if args.out:
         out = Path(args.out)
         _check_out(out, args.overwrite)
         write_json(out, metrics)
-    summary = {k: v for k, v in metrics.items() if not isinstance(v, list)}
+    summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
     print(json.dumps(summary, indent=2, default=str))
 
 
@@ -247,6 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
     p.add_argument("--scheme", default="cn")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
+    p.add_argument("--no-verdict", action="store_true",
+                   help="skip the 'is it GENERIC?' verdict (it trains a black-box reference)")
+    p.add_argument("--verdict-steps", type=int, default=3000,
+                   help="training steps of the black-box reference (default 3000)")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_evaluate)
 

@@ -195,7 +195,7 @@ def fit(
             f"batch_size={batch_size}, eval_every={eval_every}."
         )
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
-    n = model_size(model)
+    n = getattr(model, "n", None) or model_size(model)
     valid_pairs = None
     if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
         train_data, valid_data = data.split(float(validation), seed=seed_split)
