@@ -10,7 +10,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import ArrayLike, Float
 
 from .._errors import MetriplexError, RolloutFailure
 from ..data import Trajectories
@@ -62,7 +62,7 @@ def generate(
     seed: int = 0,
     substeps: int | None = None,
     scheme: AbstractScheme | None = None,
-    x0: Float[Array, "trajectories n"] | None = None,
+    x0: Float[ArrayLike, "trajectories n"] | None = None,
 ) -> Trajectories:
     r"""Ground-truth trajectories: ``trajectories`` initial states from
     ``system.sample_initial(trajectories, seed=seed)``, each recorded at
