@@ -7,6 +7,7 @@ __version__ = "0.1.0"
 
 from . import diagnostics as diagnostics
 from . import structure as structure
+from . import systems as systems
 from ._errors import MetriplexError as MetriplexError
 from ._errors import RolloutFailure as RolloutFailure
 from ._errors import TrainingDiverged as TrainingDiverged

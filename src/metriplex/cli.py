@@ -220,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
-                   help="system parameter, e.g. --param parameters=spnn")
+                   help="system parameter, e.g. --param parameter_set=spnn or --param inertia=10,20,40")
     p.add_argument("--float64", action="store_true", help="integrate in float64")
     p.add_argument("--out", required=True)
     p.add_argument("--overwrite", action="store_true")
