@@ -49,15 +49,18 @@ BEGIN, END = "<!-- bench_schemes:begin -->", "<!-- bench_schemes:end -->"
 
 def cases(quick: bool):
     """(label, system, dt, steps): the published settings, plus the unit pendulum at dt=0.01
-    (PHYSICS.md's second column)."""
+    (PHYSICS.md's second column) and the pendulum in (q, p, theta) at dt=0.1, where PHYSICS.md §3
+    reports negative entropy steps of Crank–Nicolson."""
     unit = get_system("pendulum-energetic", parameter_set="unit")
     spnn = get_system("pendulum-energetic", parameter_set="spnn")
     rigid = get_system("rigid-body")
+    temperature = get_system("pendulum-temperature")
     out = [
         ("pendulum `unit`", unit, unit.defaults.dt, unit.defaults.steps),
         ("pendulum `unit`", unit, 0.01, 4000),
         ("pendulum `spnn`", spnn, spnn.defaults.dt, spnn.defaults.steps),
         ("rigid body", rigid, rigid.defaults.dt, rigid.defaults.steps),
+        ("pendulum (q, p, θ) `unit`", temperature, 0.1, 400),
     ]
     if quick:
         out = [(label, s, dt, min(steps, 200)) for label, s, dt, steps in out]
