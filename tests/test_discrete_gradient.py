@@ -68,7 +68,9 @@ SCALES = [1.0, 0.1, 1e-3, 1e-6, 1e-9, 0.0]
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_discrete_gradient_identity(seed):
     n = 5
-    E = mx.MLPPotential(n, width=16, depth=2, key=jr.key(seed))
+    # The third network sees rotation-invariant features, as the pendulum presets do.
+    features = mx.FeatureMap((((0, 1), ()), ((2, 3), (0, 1))), (4,)) if seed == 2 else None
+    E = mx.MLPPotential(n, width=16, depth=2, features=features, key=jr.key(seed))
     x0, x1 = _pairs(n, seed + 10, SCALES)
 
     @jax.jit
