@@ -157,6 +157,15 @@ def test_model_file_errors(oscillator_run, tmp_path):
                        r"data have 6 state variables but the model .* was trained on 3")
 
 
+def test_unknown_or_reordered_columns(oscillator_run, tmp_path):
+    data = mx.read(oscillator_run / "data.npz")
+    mx.write(tmp_path / "renamed.csv", data.with_names(("q", "p", "entropy")))
+    res = run("rollout", oscillator_run / "run", tmp_path / "renamed.csv", "--out", tmp_path / "p.npz")
+    assert_clean_error(res, r"columns \(q, p, entropy\) differ from the model's \(q, p, s\); "
+                            r"unknown: entropy")
+    assert not (tmp_path / "p.npz").exists()
+
+
 def test_help_lists_commands():
     res = run("--help")
     assert res.returncode == 0

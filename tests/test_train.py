@@ -122,3 +122,43 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     hb = json.loads((tmp_path / "cut" / "history.json").read_text())
     assert ha["step"] == hb["step"]
     np.testing.assert_allclose(ha["valid"]["total"], hb["valid"]["total"], rtol=1e-9)
+
+
+def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
+    mx.write(tmp_path / "d.npz", data)
+    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "100000", "--eval-every",
+            "50", "--checkpoint-every", "1000", "--width", "8", "--batch-size", "64"]
+    proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
+                             "--out", str(tmp_path / "run"), *opts, "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    hist = tmp_path / "run" / "config.json"
+    deadline = time.time() + 300
+    while time.time() < deadline and not hist.exists():
+        time.sleep(0.2)
+    time.sleep(8.0)  # let it train a while (checkpoints only every 1000 evaluations)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err
+    assert "interrupted" in err and "--resume" in err and "Traceback" not in err
+    assert (tmp_path / "run" / "checkpoint.ckpt").exists()
+    assert (tmp_path / "run" / "model.mpx").exists()
+    h = json.loads((tmp_path / "run" / "history.json").read_text())
+    assert h["stopped"].startswith("interrupted at step") and h["step"][-1] > 0
+
+
+def test_cli_divergence_keeps_the_best_model(tmp_path):
+    from metriplex.cli import main
+
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 30)
+    mx.write(tmp_path / "d.npz", data)
+    code = main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "run"), "--entropy",
+                 "sum:2", "--poisson", "canonical:1", "--lr", "1e12", "--steps", "400",
+                 "--eval-every", "10", "--width", "8", "--quiet"])
+    assert code == 2
+    assert (tmp_path / "run" / "model.mpx").exists()
+    h = json.loads((tmp_path / "run" / "history.json").read_text())
+    assert h["stopped"].startswith("diverged at step")
+    model = mx.load(tmp_path / "run")
+    f = np.asarray(model.vector_field(jnp.asarray(data.x[0], jnp.float32)))
+    assert np.all(np.isfinite(f))

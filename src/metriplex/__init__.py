@@ -19,6 +19,7 @@ from .diagnostics import evaluate as evaluate
 from .integrate import RK4 as RK4
 from .integrate import AbstractScheme as AbstractScheme
 from .integrate import CrankNicolson as CrankNicolson
+from .integrate import DiscreteGradient as DiscreteGradient
 from .integrate import ImplicitMidpoint as ImplicitMidpoint
 from .integrate import Rollout as Rollout
 from .integrate import simulate as simulate

@@ -128,6 +128,13 @@ def cmd_train(args) -> None:
         f"validation loss {history.best_valid:.3e} at step {history.best_step}; rollout error "
         f"on {metrics['evaluated_on']}: {metrics['rollout_error_mean']:.3e}; run folder: {out}"
     )
+    if history.stopped.startswith("interrupted"):
+        print(
+            f"metriplex train: interrupted; the best model so far and a checkpoint are in {out}. "
+            "Continue with the same command and --resume.",
+            file=sys.stderr,
+        )
+        return 130
 
 
 def cmd_rollout(args) -> None:
@@ -292,7 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        args.func(args)
+        code = args.func(args)
     except MetriplexError as e:
         print(f"metriplex {args.command}: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -303,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"metriplex {args.command}: error: {e.strerror or e}: {e.filename or ''}",
               file=sys.stderr)
         return EXIT_BAD_INPUT
-    return 0
+    return code or 0
 
 
 if __name__ == "__main__":

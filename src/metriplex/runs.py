@@ -132,13 +132,23 @@ def run_config(run_dir: str | Path) -> dict:
 
 
 def check_names(run_dir, data: Trajectories) -> None:
-    header = run_config(run_dir)
-    n = header.get("n")
+    """The data must have the columns the model was trained on, in the same order."""
+    from .io import read_header
+
+    header = read_header(run_dir)
+    n, names = header.get("n"), list(header.get("names", []))
     if n is not None and n != data.n:
         raise MetriplexError(
             f"the data have {data.n} state variables but the model in {str(run_dir)!r} was "
-            f"trained on {n} ({', '.join(header.get('names', []))}). Pass data with the same "
-            "columns."
+            f"trained on {n} ({', '.join(names)}). Pass data with the same columns."
+        )
+    if names and list(data.names) != names:
+        unknown = [c for c in data.names if c not in names]
+        raise MetriplexError(
+            f"the data's columns ({', '.join(data.names)}) differ from the model's "
+            f"({', '.join(names)})" + (f"; unknown: {', '.join(unknown)}" if unknown else
+                                       "; same names in another order") +
+            ". Rename or reorder the columns to match the training data."
         )
 
 
