@@ -92,7 +92,7 @@ def _cli(*args, **kw):
 def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
     mx.write(tmp_path / "d.npz", data)
-    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "3000", "--eval-every",
+    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "1200", "--eval-every",
             "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64",
             "--quiet"]
     full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts)
