@@ -108,9 +108,9 @@ def energy_entropy(ts, E, S, *, E_true=None, S_true=None):
     a1.plot(ts, E, color="C3", label="learned E")
     a2.plot(ts, S, color="C0", label="learned S")
     if E_true is not None:
-        a1.plot(ts, E_true, color="0.3", ls="--", label="true E (affine fit)")
+        a1.plot(ts, E_true, color="0.3", ls="--", label="true E along the true trajectory (affine fit)")
     if S_true is not None:
-        a2.plot(ts, S_true, color="0.3", ls="--", label="true S (affine fit)")
+        a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
     a1.set_xlabel("t")
     a2.set_xlabel("t")
     a1.set_title("energy along the learned rollout")
