@@ -131,6 +131,45 @@ def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransfo
     return optax.chain(optax.clip_by_global_norm(10.0), optax.adam(schedule))
 
 
+def train_chunk(loss: Loss, optimizer, static, batch_size: int, shard=None):
+    """The compiled unit of :func:`fit`: ``chunk(params, opt_state, key, length, full_train)``
+    runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
+    ``full_train`` (a :class:`Batch` of all training pairs), and returns ``(params, opt_state,
+    mean loss, mean loss terms)``.
+
+    The training pairs are an argument, not a closed-over constant: XLA would otherwise embed
+    (and constant-fold over) the whole data set in the program, which slows compilation.
+
+    Exposed (privately) so that ``benchmarks/run.py`` times exactly the step that ``fit`` runs.
+    """
+    def loss_fn(p, batch, k):
+        return loss(eqx.combine(p, static), batch, key=k)
+
+    def chunk(params, opt_state, key, length, full_train):
+        n_train = full_train.x0.shape[0]
+
+        def one(carry, k):
+            params, opt_state = carry
+            kb, kl = jr.split(k)
+            idx = jr.randint(kb, (batch_size,), 0, n_train)
+            batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx], full_train.scale)
+            if shard is not None:
+                batch = shard(batch)
+            (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
+            # Optax mixes int step counts with floats; keep it working under strict promotion.
+            with jax.numpy_dtype_promotion("standard"):
+                updates, opt_state = optimizer.update(grads, opt_state, params)
+            params = eqx.apply_updates(params, updates)
+            return (params, opt_state), (value, parts)
+
+        (params, opt_state), (values, parts) = jax.lax.scan(
+            one, (params, opt_state), jr.split(key, length)
+        )
+        return params, opt_state, jnp.mean(values), jax.tree_util.tree_map(jnp.mean, parts)
+
+    return chunk
+
+
 def fit(
     model: GenericModel,
     data,
@@ -230,26 +269,7 @@ def fit(
     def loss_fn(p, batch, k):
         return loss(eqx.combine(p, static), batch, key=k)
 
-    @eqx.filter_jit
-    def run_chunk(params, opt_state, key, length):
-        def one(carry, k):
-            params, opt_state = carry
-            kb, kl = jr.split(k)
-            idx = jr.randint(kb, (bsz,), 0, n_train)
-            batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx], full_train.scale)
-            if shard is not None:
-                batch = shard(batch)
-            (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
-            # Optax mixes int step counts with floats; keep it working under strict promotion.
-            with jax.numpy_dtype_promotion("standard"):
-                updates, opt_state = optimizer.update(grads, opt_state, params)
-            params = eqx.apply_updates(params, updates)
-            return (params, opt_state), (value, parts)
-
-        (params, opt_state), (values, parts) = jax.lax.scan(
-            one, (params, opt_state), jr.split(key, length)
-        )
-        return params, opt_state, jnp.mean(values), jax.tree_util.tree_map(jnp.mean, parts)
+    run_chunk = eqx.filter_jit(train_chunk(loss, optimizer, static, bsz, shard))
 
     eval_size = 4096
 
@@ -313,7 +333,7 @@ def fit(
                 length = min(eval_every, steps - done)
                 key, sub = jr.split(key)
                 params, opt_state, train_value, train_parts = run_chunk(
-                    params, opt_state, sub, length
+                    params, opt_state, sub, length, full_train
                 )
                 train_value = float(train_value)
                 train_parts = {k: float(v) for k, v in train_parts.items()}
@@ -364,7 +384,9 @@ def fit(
                 break
             length = min(eval_every, steps - done)
             key, sub = jr.split(key)
-            params, opt_state, train_value, train_parts = run_chunk(params, opt_state, sub, length)
+            params, opt_state, train_value, train_parts = run_chunk(
+                params, opt_state, sub, length, full_train
+            )
             train_value = float(train_value)
             train_parts = {k: float(v) for k, v in train_parts.items()}
             done += length
