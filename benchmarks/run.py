@@ -255,7 +255,7 @@ def bench_training(args) -> list[dict]:
     for model_name in args.models:
         _, n, _, jacs = MODELS[model_name]
         for dname, dtype in dtypes:
-            for batch in args.batches:
+            for batch in (args.float64_batches if dname == "float64" else args.batches):
                 runs = {}
                 jacs = [j for j in jacs if j in args.jacobi] or list(jacs[:1])
                 for jac in jacs:
@@ -529,6 +529,8 @@ def main(argv=None) -> int:
                     help="1 (default): pin one compute thread; 0: XLA's default")
     ap.add_argument("--models", nargs="*", default=None, choices=list(MODELS))
     ap.add_argument("--batches", type=int, nargs="*", default=None)
+    ap.add_argument("--float64-batches", type=int, nargs="*", default=None,
+                    help="batches timed in float64 (default: the same as --batches)")
     ap.add_argument("--jacobi", nargs="*", default=None, choices=["none", "exact", "stochastic"],
                     help="Jacobi modes to time (where the model has a learned L)")
     ap.add_argument("--out", type=Path, default=None,
@@ -542,6 +544,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     q = args.quick
     args.models = args.models or (["rigid-body"] if q else list(MODELS))
+    if args.float64_batches is None:
+        args.float64_batches = args.batches
     args.jacobi = args.jacobi or (["exact"] if q else ["none", "exact", "stochastic"])
     args.batches = args.batches or ([32] if q else [256, 1024, 8192])
     args.length = 2 if q else 4
