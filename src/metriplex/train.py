@@ -137,8 +137,9 @@ def train_chunk(loss: Loss, optimizer, static, batch_size: int, shard=None):
     ``full_train`` (a :class:`Batch` of all training pairs), and returns ``(params, opt_state,
     mean loss, mean loss terms)``.
 
-    The training pairs are an argument, not a closed-over constant: XLA would otherwise embed
-    (and constant-fold over) the whole data set in the program, which slows compilation.
+    The training pairs are an argument, not a closed-over constant, so the data set is not
+    embedded in the compiled program and the chunk can be timed on its own
+    (``benchmarks/run.py``).
 
     Exposed (privately) so that ``benchmarks/run.py`` times exactly the step that ``fit`` runs.
     """
