@@ -140,7 +140,10 @@ def main(argv=None):
         f"jax {jax.__version__}, {jax.devices()[0].platform}, float32, one compute thread; "
         f"batch {batch}, width {args.width} x {args.depth}; median of {repeats} repeats"
     )
-    header = f"{'n':>4} {'mode':>11} {'cpu ms':>9} {'wall ms':>9} {'x none':>7} {'GFLOP/step':>11} {'GFLOP/s':>8} {'compile s':>10}"
+    header = (
+        f"{'n':>4} {'mode':>11} {'cpu ms':>9} {'wall ms':>9} {'x none':>7} {'GFLOP/step':>11} "
+        f"{'GFLOP/s':>8} {'compile s':>10}"
+    )
     print(header)
     print("-" * len(header))
     for n in sizes:

@@ -292,7 +292,8 @@ def test_save_load_round_trip(tmp_path):
         "for name, (path, n) in json.loads(sys.argv[1]).items():\n"
         "    m = mx.load(path)\n"
         "    x = jr.normal(jr.key(40), (32, n))\n"
-        "    out[name] = np.asarray(eqx.filter_jit(lambda m, x: jax.vmap(m.vector_field)(x))(m, x))\n"
+        "    f = eqx.filter_jit(lambda m, x: jax.vmap(m.vector_field)(x))\n"
+        "    out[name] = np.asarray(f(m, x))\n"
         "np.savez(sys.argv[2], **out)\n"
     )
     arg = json.dumps({k: [v[0], v[1]] for k, v in expected.items()})
