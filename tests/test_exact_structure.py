@@ -157,6 +157,9 @@ def test_degeneracy_leak_is_bounded_by_eps():
     for r in 10.0 ** np.arange(-8.0, 2.0, 0.5):
         leak = jnp.linalg.norm(P(x, r * g0) @ (r * g0) / d)
         assert float(leak) <= bound * (1.0 + 1e-9)
+    # An eps whose square underflows still gives L = A at g = 0, not 0 * inf.
+    tiny = ProjectedSkewMLPPoisson(N, width=16, scaling=SCALING, eps=1e-200, key=jr.key(8))
+    assert bool(jnp.all(tiny(x, jnp.zeros((N,))) == tiny.base(x)))
 
 
 def _jacobi_rms(model, xs):

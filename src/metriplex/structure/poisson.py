@@ -194,7 +194,9 @@ def _projector_vectors(g: State, scale: tuple[float, ...] | None, eps: float):
         d = jnp.asarray(scale, g.dtype)
         h = d * g
         d2g = d * h
-    r = jax.lax.rsqrt(jnp.sum(h * h) + jnp.asarray(eps * eps, g.dtype))
+    # eps**2 must not underflow, or s = 0 at g = 0 and g * rsqrt(s) = 0 * inf.
+    e2 = max(eps * eps, float(jnp.finfo(g.dtype).tiny))
+    r = jax.lax.rsqrt(jnp.sum(h * h) + jnp.asarray(e2, g.dtype))
     return g * r, d2g * r
 
 
