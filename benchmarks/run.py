@@ -394,22 +394,26 @@ def _lookup(results, key):
 
 
 REASONS = {
-    # Filled in from the measurements (see docs/performance.md, "Where the time goes").
+    # Written from the measurements of the committed results (docs/performance.md, "Where the
+    # time goes"); the figures in them are those of that run.
     "pendulum n=10, batch 1024, no Jacobi": (
-        "the step is ~1 MFLOP/sample of small (width-64) matmuls plus softplus/sigmoid on every "
-        "hidden unit, differentiated twice; at batch 1024 that is ~1 GFLOP at the ~35-40 "
-        "GFLOP/s one core sustains on such shapes"),
+        "0.40 MFLOP/sample = 0.40 GFLOP/step at ~27 GFLOP/s (~1/3 of the measured matmul "
+        "rate); ~30 % of the step is the friction block's batched 10x10 products M = B B^T and "
+        "their transposes. 10 ms needs fewer FLOP per sample or ~40 GFLOP/s"),
     "fully learned n=10, batch 1024, no Jacobi": (
-        "four networks instead of two (learned S and L), each differentiated twice"),
+        "0.51 MFLOP/sample at ~31 GFLOP/s: four networks, each differentiated twice"),
     "fully learned n=10, batch 1024, exact Jacobi": (
-        "n = 10 forward-mode tangents of the L network, differentiated again for the gradient"),
+        "1.29 MFLOP/sample (n = 10 forward-mode tangents of L, differentiated again) at ~28 "
+        "GFLOP/s; needs ~1.6x fewer FLOP (see the suggestions: reuse L, i<j<l only)"),
     "fully learned n=10, batch 1024, stochastic Jacobi": (
-        "three directional derivatives of L per probe, differentiated again for the gradient"),
+        "0.83 MFLOP/sample at only ~22 GFLOP/s: per-sample 10x10 products of the probes and "
+        "~1.5 ms/step of threefry normals"),
     "64 trajectories x 1000 CN steps, learned-size model": (
-        "each CN step is a Newton solve with a dense Jacobian of the learned vector field "
-        "(second derivatives of the networks), 1000 sequential steps"),
+        "1.0 Newton iteration per step, ~17 us per trajectory-step: each iteration builds the "
+        "dense Jacobian (jacfwd, n tangents) of the learned field, i.e. second derivatives of "
+        "the networks; integrate.py, see the suggestions"),
     "64 trajectories x 1000 CN steps, pendulum ground truth": (
-        "1000 sequential Newton solves; per-step dispatch of the while loop dominates"),
+        "1000 sequential Newton solves (2 iterations per step)"),
 }
 
 
@@ -541,6 +545,8 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=Path, default=ROOT / "runs",
                     help="folder of reference runs for time to accuracy")
     ap.add_argument("--skip", nargs="*", default=[], choices=["training", "rollout"])
+    ap.add_argument("--report-only", type=Path, default=None, metavar="RESULTS_JSON",
+                    help="measure nothing: re-render the tables (and --docs) from a results.json")
     args = ap.parse_args(argv)
     q = args.quick
     args.models = args.models or (["rigid-body"] if q else list(MODELS))
@@ -558,6 +564,14 @@ def main(argv=None) -> int:
     args.rollout_repeats = 2 if q else 5
     out = args.out or ROOT / "benchmarks"
     docs = args.docs or (None if q else ROOT / "docs" / "performance.md")
+    if args.report_only is not None:
+        results = json.loads(args.report_only.read_text())
+        _, results["targets"] = targets_table(results)
+        text = report(results)
+        print(text)
+        if docs is not None:
+            write_docs(docs, text)
+        return 0
 
     results = {"command": " ".join(["benchmarks/run.py", *(argv or sys.argv[1:])]),
                "machine": machine(args.threads), "quick": q}
