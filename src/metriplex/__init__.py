@@ -31,6 +31,7 @@ from .io import save as save
 from .io import write as write
 from .losses import CrankNicolsonResidual as CrankNicolsonResidual
 from .losses import DegeneracyPenalty as DegeneracyPenalty
+from .losses import DiscreteGradientResidual as DiscreteGradientResidual
 from .losses import FrictionDegeneracy as FrictionDegeneracy
 from .losses import JacobiPenalty as JacobiPenalty
 from .losses import Loss as Loss

@@ -28,7 +28,7 @@ import jax.random as jr
 
 from ._errors import MetriplexError
 from ._model import GenericModel, Terms
-from .integrate import AbstractScheme, CrankNicolson, ImplicitMidpoint
+from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
 
 
 class Batch(NamedTuple):
@@ -148,6 +148,12 @@ def CrankNicolsonResidual() -> SchemeResidual:
 def MidpointResidual() -> SchemeResidual:
     """The implicit-midpoint residual of each pair."""
     return SchemeResidual(ImplicitMidpoint())
+
+
+def DiscreteGradientResidual() -> SchemeResidual:
+    """The discrete-gradient GENERIC residual of each pair: train with the scheme that conserves
+    the learned energy exactly and never decreases the learned entropy in rollouts."""
+    return SchemeResidual(DiscreteGradient())
 
 
 class PoissonDegeneracy(AbstractLossTerm):
