@@ -39,12 +39,16 @@ from .losses import MidpointResidual as MidpointResidual
 from .losses import PoissonDegeneracy as PoissonDegeneracy
 from .losses import SchemeResidual as SchemeResidual
 from .structure import CanonicalPoisson as CanonicalPoisson
+from .structure import CasimirPoisson3 as CasimirPoisson3
+from .structure import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .structure import CholeskyFriction as CholeskyFriction
 from .structure import FeatureMap as FeatureMap
 from .structure import Known as Known
 from .structure import KnownFriction as KnownFriction
 from .structure import KnownPoisson as KnownPoisson
 from .structure import MLPPotential as MLPPotential
+from .structure import ProjectedCholeskyFriction as ProjectedCholeskyFriction
+from .structure import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .structure import Scaling as Scaling
 from .structure import SkewMLPPoisson as SkewMLPPoisson
 from .structure import SumOf as SumOf
