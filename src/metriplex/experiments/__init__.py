@@ -62,7 +62,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             "rigid-body", "rigid-body", 2 * math.pi / 100,
             full=Size(5, 10_000, 10_000, 5, 1000),
-            quick=Size(5, 1000, 2000, 2, 200),
+            quick=Size(20, 250, 2000, 2, 200),
             horizon=None,
             bars={"rollout_error_mean": 1e-2, "jacobi_residual_relative": 1e-3},
             description="learn L and E, no prior (Jacobi penalty on); paper: 5 x 10 000 steps",
@@ -70,7 +70,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             "pendulum-energetic", "pendulum-energetic", 0.1,
             full=Size(100, 400, 12_000, 10, 400),
-            quick=Size(40, 100, 3000, 2, 100),
+            quick=Size(40, 100, 5000, 4, 100),
             horizon=10.0,
             bars={"rollout_error_to_horizon_mean": 5e-2,
                   "energy_relative_drift_gauge_fixed": 1e-3, "entropy_min_step": 0.0},
@@ -80,7 +80,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         Experiment(
             "pendulum-temperature", "pendulum-temperature", 0.04,
             full=Size(40, 1000, 6000, 10, 250),
-            quick=Size(20, 250, 1200, 2, 250),
+            quick=Size(20, 250, 2000, 2, 250),
             horizon=10.0,
             bars={"rollout_error_to_horizon_mean": 1e-1,
                   "energy_relative_drift_gauge_fixed": 1e-3},
@@ -89,8 +89,8 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         Experiment(
             "gas-containers", "gas-containers", 0.02,
-            full=Size(80, 400, 10_000, 20, 400),
-            quick=Size(16, 200, 2000, 4, 200),
+            full=Size(80, 400, 30_000, 20, 400),
+            quick=Size(16, 200, 6000, 4, 200),
             horizon=None,
             bars={"rollout_error_mean": 2e-2},
             description="L canonical, S = S1 + S2; learn E and M (100 trajectories, 80 train)",
@@ -129,15 +129,20 @@ def run_experiment(
     overwrite: bool = False,
     degeneracy: str = "soft",
     progress: bool = True,
+    size: Size | None = None,
     **overrides,
 ) -> dict[str, Any]:
-    """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``)."""
+    """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
+
+    ``size`` replaces the experiment's data and training sizes (e.g. to study coverage);
+    ``overrides`` replace fields of its :class:`~metriplex.config.RunConfig`.
+    """
     from ..systems import generate, get_system
 
     exp = _check_name(name)
     if degeneracy not in ("soft", "exact"):
         raise MetriplexError(f"--degeneracy must be soft or exact; got {degeneracy!r}.")
-    size = exp.quick if quick else exp.full
+    size = size if size is not None else exp.quick if quick else exp.full
     out = Path(out) if out is not None else Path("runs") / (name + ("-quick" if quick else ""))
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     system = get_system(exp.system, **exp.system_params)
@@ -168,6 +173,7 @@ def run_experiment(
         data_seconds=gen_seconds, train_trajectories=len(train),
         validation_trajectories=0 if valid is None else len(valid),
         test_trajectories=len(test), dt=exp.dt, stopped=history.stopped,
+        size=dataclasses.asdict(size), rollout_scheme=exp.rollout_scheme,
         best_step=history.best_step,
     )
     untrained = _untrained_error(config, train, test, scheme, horizon)
@@ -180,8 +186,9 @@ def run_experiment(
     write_json(out / "metrics.json", metrics)
     key = "rollout_error_to_horizon_mean" if horizon else "rollout_error_mean"
     print(f"{name}{' (quick)' if quick else ''}: test rollout error {metrics[key]:.3e} "
-          f"(untrained {untrained:.3e}; ground-truth CN {truth[key]:.3e}), energy drift "
-          f"{metrics['energy_relative_drift']:.2e}, training {seconds:.0f} s -> {out}")
+          f"(untrained {untrained:.3e}; ground-truth CN {truth[key]:.3e}), learned-energy drift "
+          f"{metrics['energy_relative_drift_gauge_fixed']:.2e} (gauge-fixed), training "
+          f"{seconds:.0f} s -> {out}")
     for k, b in metrics["bars"].items():
         print(f"  {k}: {b['value']:.3e} vs target {b['target']:.0e}: "
               f"{'met' if b['met'] else 'NOT met'}")
@@ -236,9 +243,9 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
         E_l = np.asarray(jax.vmap(model.energy)(p.astype(dtype)), dtype=np.float64)
         E_t = np.asarray(jax.vmap(system.model.energy)(p), dtype=np.float64)
         E0 = max(abs(float(system.model.energy(jnp.asarray(xs[k, 0])))), 1e-300)
-        gauge.append(float(np.max(np.abs(E_l - E_l[0]))) / max(slope, 1e-300) / E0
-                     if failed[k] < 0 else float("inf"))
-        true.append(float(np.max(np.abs(E_t - E_t[0]))) / E0 if failed[k] < 0 else float("inf"))
+        # Up to a failed step, like evaluate()'s raw drift; failures are counted separately.
+        gauge.append(float(np.max(np.abs(E_l - E_l[0]))) / max(slope, 1e-300) / E0)
+        true.append(float(np.max(np.abs(E_t - E_t[0]))) / E0)
     return {"energy_relative_drift_gauge_fixed": float(np.max(gauge)),
             "true_energy_relative_drift": float(np.max(true))}
 
