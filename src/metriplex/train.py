@@ -322,24 +322,27 @@ def fit(
 
     start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
     evaluations = 0
-    resumed_at = done if resume else -1
+    skip_evaluation = resume
     bar = tqdm(total=steps, initial=done, disable=not progress, desc="fit", unit="step", leave=False)
+
+    def run_next_chunk():
+        nonlocal key, params, opt_state, train_value, train_parts, done
+        length = min(eval_every, steps - done)
+        key, sub = jr.split(key)
+        params, opt_state, value, parts = run_chunk(params, opt_state, sub, length, full_train)
+        train_value = float(value)
+        train_parts = {k: float(v) for k, v in parts.items()}
+        done += length
+        bar.update(length)
+
     try:
         while True:
-            if done == resumed_at:
-                # This evaluation is already in the restored history; continue training.
-                resumed_at = -1
+            if skip_evaluation:
+                # Resumed: the restored history already holds the evaluation at `done`.
+                skip_evaluation = False
                 if done >= steps or history.stopped.startswith("early stop"):
                     break
-                length = min(eval_every, steps - done)
-                key, sub = jr.split(key)
-                params, opt_state, train_value, train_parts = run_chunk(
-                    params, opt_state, sub, length, full_train
-                )
-                train_value = float(train_value)
-                train_parts = {k: float(v) for k, v in train_parts.items()}
-                done += length
-                bar.update(length)
+                run_next_chunk()
                 continue
             if done > 0 or steps == 0:
                 tr_total, tr_parts = train_value, train_parts
@@ -383,15 +386,7 @@ def fit(
             if patience is not None and since_best > patience:
                 history.stopped = f"early stop at step {done} (no improvement in {patience} evaluations)"
                 break
-            length = min(eval_every, steps - done)
-            key, sub = jr.split(key)
-            params, opt_state, train_value, train_parts = run_chunk(
-                params, opt_state, sub, length, full_train
-            )
-            train_value = float(train_value)
-            train_parts = {k: float(v) for k, v in train_parts.items()}
-            done += length
-            bar.update(length)
+            run_next_chunk()
     except KeyboardInterrupt:
         history.stopped = f"interrupted at step {done}"
     finally:
