@@ -325,6 +325,9 @@ def _check_three(n: int, name: str) -> None:
         )
 
 
+_SOFTPLUS_ONE = float(np.log(np.e - 1.0))  # softplus(_SOFTPLUS_ONE) = 1
+
+
 class _Casimir3Base(AbstractPoisson):
     r"""Shared code of the 3-D bivectors :math:`L = D\,[\tilde w]_\times D`,
     :math:`\tilde w = \varphi(z)\,\tilde c(z)` on standardised :math:`z = D^{-1}(x - c)`."""
@@ -337,9 +340,11 @@ class _Casimir3Base(AbstractPoisson):
         s = self.scaling
         return x if s is None else standardise(x, s.shift, s.scale)
 
+    def _factor(self, z: State):
+        raise NotImplementedError
+
     def _assemble(self, z: State, c: State) -> Matrix:
-        # phi = 1 + network: at initialisation L ~ [grad C]_x rather than ~0.
-        w = (1.0 + self.phi(z)) * c
+        w = self._factor(z) * c
         L = _cross_matrix(w)
         s = self.scaling
         if s is None:
@@ -362,13 +367,20 @@ class CasimirPoisson3(_Casimir3Base):
 
     .. math:: L_{ij} = \varepsilon_{ijk} w_k,\qquad w = \varphi(x)\,\nabla C(x),
 
-    with two scalar MLPs, :math:`\varphi` (stored as :math:`1 + \text{MLP}`) and the Casimir
-    :math:`C`. In three dimensions the Jacobi identity of :math:`[w]_\times` is
+    with two scalar MLPs, :math:`\varphi > 0` (stored as
+    :math:`\operatorname{softplus}(\text{MLP} + \log(e-1))`, so :math:`\varphi = 1` for a zero
+    network) and the Casimir :math:`C`. In three dimensions the Jacobi identity of :math:`[w]_\times` is
     :math:`w\cdot(\nabla\times w) = 0`, and :math:`\nabla\times(\varphi\nabla C) =
     \nabla\varphi\times\nabla C \perp \nabla C`; :math:`C` is a Casimir
     (:math:`L\nabla C = 0`). Every Poisson bivector on a 3-D domain is locally of this form
-    near a point where :math:`L\ne 0`. The rigid body is :math:`\varphi = 1`,
-    :math:`C = -\tfrac12|m|^2`.
+    near a point where :math:`L\ne 0`, with a :math:`\varphi` of one sign (the sign goes into
+    :math:`C`). The rigid body is :math:`\varphi = 1`, :math:`C = -\tfrac12|m|^2`.
+
+    Why :math:`\varphi > 0`: with a signed :math:`\varphi` (:math:`1 + \text{MLP}`) training on
+    the rigid body got stuck in 2 of 4 seeds; in the one examined :math:`\varphi` changed sign
+    inside the data (from -2.6 to 2.5), so :math:`L = 0` on a surface there, a spurious set of
+    equilibria that gradient descent does not remove. A positive :math:`\varphi` leaves zeros of :math:`w` only at critical points of
+    :math:`C`.
 
     With a scaling the networks see :math:`z = D^{-1}(x-c)` and :math:`L = D[\tilde w]_\times D`
     with :math:`\tilde w = \varphi\nabla_z C` (a linear change of variables keeps Jacobi).
@@ -397,6 +409,9 @@ class CasimirPoisson3(_Casimir3Base):
         self.casimir = _Scalar(width, depth, activation, key=k2)
         self.n = n
         self.scaling = scaling
+
+    def _factor(self, z: State):
+        return jax.nn.softplus(self.phi(z) + _SOFTPLUS_ONE)
 
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         z = self._z(x)
@@ -427,7 +442,8 @@ class EntropyCasimirPoisson3(_Casimir3Base):
     exactly degenerate Poisson bivector near points where :math:`\nabla S \ne 0` (the kernel of
     a rank-2 :math:`[w]_\times` is :math:`w`). Where :math:`\nabla S = 0` it gives :math:`L=0`,
     so with an entropy that is zero (a conservative system) there are no reversible dynamics:
-    use :class:`CasimirPoisson3` there.
+    use :class:`CasimirPoisson3` there. Here :math:`\varphi = 1 + \text{MLP}` is signed: the
+    orientation of :math:`w` relative to the given :math:`\nabla S` must be learnable.
     """
 
     def __init__(
@@ -444,6 +460,10 @@ class EntropyCasimirPoisson3(_Casimir3Base):
         self.phi = _Scalar(width, depth, activation, key=key)
         self.n = n
         self.scaling = scaling
+
+    def _factor(self, z: State):
+        # 1 + network: at initialisation L ~ [grad S]_x rather than ~0.
+        return 1.0 + self.phi(z)
 
     def __call__(self, x: State, grad_entropy: State) -> Matrix:
         s = self.scaling
