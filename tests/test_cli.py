@@ -63,7 +63,8 @@ def test_run_folder_contents(oscillator_run):
     run_dir = oscillator_run / "run"
     for name in ("model.mpx", "config.json", "history.json", "metrics.json", "checkpoint.ckpt",
                  "figures/loss.png", "figures/loss.pdf", "figures/loss.npz",
-                 "figures/trajectories.png", "figures/energy_entropy.npz"):
+                 "figures/trajectories.png", "figures/energy_entropy.npz", "figures/error.pdf",
+                 "figures/residual.png", "figures/residual.npz"):
         assert (run_dir / name).exists(), name
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["names"] == ["q", "p", "s"] and cfg["config"]["poisson"] == "canonical:1"

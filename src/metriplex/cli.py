@@ -151,7 +151,7 @@ def cmd_rollout(args) -> None:
     model = load(args.run)
     data = read(args.data)
     check_names(args.run, data)
-    result, _, lengths = rollout_data(model, data, scheme=scheme_from_name(args.scheme))
+    result, _, lengths = rollout_data(model, data, scheme=scheme_from_name(_scheme(args)))
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
@@ -173,6 +173,15 @@ def cmd_rollout(args) -> None:
     print(f"wrote {len(pieces)} predicted trajectories to {out}")
 
 
+def _scheme(args) -> str:
+    """The --scheme given, else the one the run in args.run was trained with."""
+    if args.scheme:
+        return args.scheme
+    from .runs import run_config
+
+    return run_config(args.run).get("config", {}).get("scheme", "cn")
+
+
 def cmd_evaluate(args) -> None:
     import json
 
@@ -183,7 +192,7 @@ def cmd_evaluate(args) -> None:
     data = read(args.data)
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
-    metrics = evaluate_run(model, data, scheme=args.scheme, figures=figures, horizon=args.horizon)
+    metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon)
     if not args.no_verdict:
         from .runs import run_config
         from .verdict import verdict
@@ -248,7 +257,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run", metavar="RUN_DIR")
     p.add_argument("data", metavar="DATA")
     p.add_argument("--out", required=True)
-    p.add_argument("--scheme", default="cn")
+    p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
+                   "scheme the run was trained with)")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_rollout)
 
@@ -257,7 +267,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", metavar="DATA")
     p.add_argument("--out", metavar="METRICS.json")
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
-    p.add_argument("--scheme", default="cn")
+    p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
+                   "scheme the run was trained with)")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
     p.add_argument("--no-verdict", action="store_true",
                    help="skip the 'is it GENERIC?' verdict (it trains a black-box reference)")

@@ -120,10 +120,13 @@ def energy_entropy(ts, E, S, *, E_true=None, S_true=None):
     return fig
 
 
-def error_over_time(ts, err, *, reference=None, ax=None):
-    """Relative rollout error against time (log scale), with a reference scheme's if given."""
+def error_over_time(ts, err, *, reference=None, per_variable=None, ax=None):
+    """Relative rollout error against time (log scale), with a reference scheme's if given and
+    each variable's error (divided by its data scale) as thin lines."""
     fig, ax = _axes(ax)
-    ax.semilogy(ts, np.maximum(err, 1e-300), color="C3", label="learned model")
+    for name, e in (per_variable or {}).items():
+        ax.semilogy(ts, np.maximum(e, 1e-300), lw=0.7, alpha=0.7, label=name)
+    ax.semilogy(ts, np.maximum(err, 1e-300), color="C3", lw=2, label="learned model")
     if reference is not None:
         ax.semilogy(ts, np.maximum(reference, 1e-300), color="0.4", ls="--",
                     label="ground truth, same scheme and dt")
@@ -145,4 +148,16 @@ def gauge_fit(true_vals, learned_vals, *, label: str, ax=None):
     ax.set_ylabel(f"learned {label}")
     ax.legend(fontsize=8)
     ax.set_title(f"learned vs true {label}")
+    return fig
+
+
+def residual_over_time(ts, residual, names: Sequence[str], ax=None):
+    """The scheme residual of each observed pair against time, per variable (log scale)."""
+    fig, ax = _axes(ax)
+    for i, name in enumerate(names[: residual.shape[1]]):
+        ax.semilogy(ts, np.maximum(np.abs(residual[:, i]), 1e-300), lw=1, label=name)
+    ax.set_xlabel("t")
+    ax.set_ylabel("|residual| / data scale")
+    ax.legend(fontsize=7, ncol=2)
+    ax.set_title("one-step residual on the observed pairs")
     return fig

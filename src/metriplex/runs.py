@@ -163,7 +163,9 @@ def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path
 
 
 def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0):
-    """Trajectories, error over time and learned E, S for trajectory ``k`` of ``data``."""
+    """The report figure set for trajectory ``k`` of ``data``: trajectories (model vs data),
+    overall and per-variable rollout error over time, the one-step residual of every observed
+    pair over time, and the learned E and S along the rollout."""
     out, xs, lengths = rollout_data(model, data, scheme=scheme_from_name(scheme))
     T = int(lengths[k])
     ts = np.asarray(out.ts)[k, :T]
@@ -173,7 +175,22 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
     plots.save_figure(plots.trajectories(ts, pred, obs, names), folder / "trajectories",
                       t=ts, learned=pred, observed=obs, names=np.array(names))
     err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
-    plots.save_figure(plots.error_over_time(ts, err), folder / "error", t=ts, error=err)
+    scale = np.where(data.x.std(axis=0) > 0, data.x.std(axis=0), 1.0)
+    per_var = np.abs(np.nan_to_num(pred, nan=np.inf) - obs) / scale[None, :]
+    plots.save_figure(plots.error_over_time(ts, err, per_variable=dict(zip(names, per_var.T))),
+                      folder / "error", t=ts, error=err, error_per_variable=per_var,
+                      names=np.array(names))
+    # The residual of each observed pair under the scheme, in units of the data scale.
+    tk, xk = data.padded()[0][k, :T], obs
+    dtype = out.xs.dtype
+    x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
+    dt = jnp.asarray(np.diff(tk), dtype)
+    sch = scheme_from_name(scheme)
+    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
+    res = jax.vmap(sch.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
+    res = np.asarray(res, dtype=np.float64) / scale[None, :]
+    plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
+                      t=tk[1:], residual=res, names=np.array(names))
     xp = jnp.nan_to_num(jnp.asarray(pred))
     E = np.asarray(jax.vmap(model.energy)(xp))
     S = np.asarray(jax.vmap(model.entropy)(xp))
