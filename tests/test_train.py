@@ -127,7 +127,7 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
 def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
     mx.write(tmp_path / "d.npz", data)
-    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "100000", "--eval-every",
+    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "50000000", "--eval-every",
             "50", "--checkpoint-every", "1000", "--width", "8", "--batch-size", "64"]
     proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
                              "--out", str(tmp_path / "run"), *opts, "--quiet"],
