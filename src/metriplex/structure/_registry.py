@@ -44,3 +44,15 @@ def not_serialisable(obj: object) -> NotSerialisable:
         "(model files never store code). Save the learned blocks only, or rebuild the known "
         "block in code after `load`."
     )
+
+
+def network_kwargs(spec: dict[str, Any]) -> dict[str, Any]:
+    """Constructor arguments shared by the network blocks, from their saved spec."""
+    from .scaling import Scaling
+
+    return {
+        "width": spec["width"],
+        "depth": spec["depth"],
+        "activation": spec.get("activation", "softplus"),
+        "scaling": Scaling.from_json(spec.get("scaling")),
+    }

@@ -16,7 +16,7 @@ import jax.random as jr
 from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._mlp import FoldedHead, Hidden, standardise
-from ._registry import not_serialisable, register
+from ._registry import network_kwargs, not_serialisable, register
 from .poisson import _check_eps, _default_eps, _projector_vectors
 from .scaling import Scaling
 
@@ -86,10 +86,7 @@ class CholeskyFriction(AbstractFriction):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             key=key,
         )
 
@@ -191,10 +188,7 @@ class ProjectedCholeskyFriction(AbstractFriction):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             eps=spec.get("eps"),
             key=key,
         )

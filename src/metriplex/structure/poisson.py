@@ -18,7 +18,7 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._mlp import FoldedHead, Hidden, standardise
-from ._registry import not_serialisable, register
+from ._registry import network_kwargs, not_serialisable, register
 from .scaling import Scaling
 
 
@@ -88,10 +88,7 @@ class SkewMLPPoisson(AbstractPoisson):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             key=key,
         )
 
@@ -281,10 +278,7 @@ class ProjectedSkewMLPPoisson(AbstractPoisson):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             eps=spec.get("eps"),
             key=key,
         )
@@ -424,10 +418,7 @@ class CasimirPoisson3(_Casimir3Base):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             key=key,
         )
 
@@ -477,9 +468,6 @@ class EntropyCasimirPoisson3(_Casimir3Base):
     def from_spec(cls, spec, n, *, key):
         return cls(
             n,
-            width=spec["width"],
-            depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
-            scaling=Scaling.from_json(spec.get("scaling")),
+            **network_kwargs(spec),
             key=key,
         )
