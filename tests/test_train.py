@@ -129,16 +129,28 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     mx.write(tmp_path / "d.npz", data)
     opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "50000000", "--eval-every",
             "50", "--checkpoint-every", "1000", "--width", "8", "--batch-size", "64"]
-    proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
-                             "--out", str(tmp_path / "run"), *opts, "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # pytest-xdist workers ignore SIGINT, and a child inherits an ignored signal: start the
+    # training process with the default disposition, so it gets Python's KeyboardInterrupt as
+    # in a terminal.
+    previous = signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train",
+                                 str(tmp_path / "d.npz"), "--out", str(tmp_path / "run"), *opts,
+                                 "--quiet"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     hist = tmp_path / "run" / "config.json"
     deadline = time.time() + 300
     while time.time() < deadline and not hist.exists():
         time.sleep(0.2)
     time.sleep(8.0)  # let it train a while (checkpoints only every 1000 evaluations)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=300)
+    try:
+        _, err = proc.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        raise
     assert proc.returncode == 130, err
     assert "interrupted" in err and "--resume" in err and "Traceback" not in err
     assert (tmp_path / "run" / "checkpoint.ckpt").exists()

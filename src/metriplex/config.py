@@ -19,8 +19,8 @@ from .data import Trajectories
 from .integrate import scheme_from_name
 from .losses import FrictionDegeneracy, JacobiPenalty, Loss, PoissonDegeneracy, SchemeResidual
 from .structure import _registry
-from .structure.friction import CholeskyFriction, ZeroFriction
-from .structure.poisson import CanonicalPoisson, SkewMLPPoisson, ZeroPoisson
+from .structure.friction import ZeroFriction
+from .structure.poisson import CanonicalPoisson, ZeroPoisson
 from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
 from .structure.scaling import Scaling
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from ._model import GenericModel
 from .data import Trajectories
-from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
+from .integrate import AbstractScheme, CrankNicolson, solve
 
 _TINY = 1e-300
 
