@@ -66,7 +66,9 @@ import numpy as np  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # float64 rows; float32 rows cast explicitly
 
 import metriplex as mx  # noqa: E402
-from metriplex.config import RunConfig, build_loss, build_model, data_scale, preset  # noqa: E402
+from metriplex.config import RunConfig, build_loss, build_model, preset  # noqa: E402
+from metriplex.data import state_scale  # noqa: E402
+from metriplex._model import with_dtype  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
 from metriplex.train import default_optimizer, train_chunk  # noqa: E402
@@ -213,14 +215,12 @@ def compile_train_step(model_name: str, jac: str, batch: int, dtype, length: int
     config = dataclasses.replace(config, batch_size=batch)
     data = training_data(system, quick)
     model = build_model(config, data, key=jr.key(0))
-    model = jax.tree_util.tree_map(
-        lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, model
-    )
+    model = with_dtype(model, dtype)
     loss = build_loss(config)
     pairs = data.pairs()
     full = Batch(
         jnp.asarray(pairs.x0, dtype), jnp.asarray(pairs.x1, dtype), jnp.asarray(pairs.dt, dtype),
-        jnp.asarray(data_scale(data), dtype),
+        jnp.asarray(state_scale(data.x), dtype),
     )
     optimizer = default_optimizer(config.lr, 10_000)
     params, static = eqx.partition(model, eqx.is_inexact_array)
@@ -313,9 +313,7 @@ def bench_rollout(args) -> list[dict]:
     for name, model in models.items():
         if name not in args.rollout_models:
             continue
-        model = jax.tree_util.tree_map(
-            lambda a: a.astype(jnp.float32) if eqx.is_inexact_array(a) else a, model
-        )
+        model = with_dtype(model, jnp.float32)
         for k in args.rollout_batches:
             x0 = jnp.asarray(x0_all[0] if k == 1 else x0_all[:k], jnp.float32)
             t0 = time.perf_counter()

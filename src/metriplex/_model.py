@@ -108,6 +108,22 @@ class GenericModel(eqx.Module):
         )
 
 
+def float_dtype(model, default=None):
+    """The dtype of the model's floating-point weights (``default``, or JAX's default float
+    type, for a model without any, such as a ground-truth system)."""
+    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    if leaves:
+        return leaves[0].dtype
+    return jnp.zeros(()).dtype if default is None else jnp.dtype(default)
+
+
+def with_dtype(model, dtype):
+    """``model`` with every floating-point weight cast to ``dtype``."""
+    return jax.tree_util.tree_map(
+        lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, model
+    )
+
+
 def _value_and_jacfwd(fn, x):
     """``(fn(x), d fn / dx)`` with the Jacobian's input axis last, in forward mode."""
     basis = jnp.eye(x.shape[0], dtype=x.dtype)

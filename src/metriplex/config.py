@@ -11,7 +11,6 @@ import dataclasses
 from typing import Any
 
 import jax.random as jr
-import numpy as np
 
 from ._errors import MetriplexError
 from ._model import GenericModel
@@ -228,7 +227,3 @@ def preset(name: str, **overrides) -> RunConfig:
         raise MetriplexError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}.")
     return RunConfig(**{**PRESETS[name], **overrides})
 
-
-def data_scale(data: Trajectories) -> np.ndarray:
-    s = data.x.std(axis=0)
-    return np.where(s > 1e-12 * max(float(np.abs(data.x).max()), 1.0), s, 1.0)

@@ -16,6 +16,15 @@ import numpy as np
 from ._errors import MetriplexError
 
 
+def state_scale(x: np.ndarray) -> np.ndarray:
+    """Per-variable standard deviation of states ``x`` (shape ``(N, n)``): the unit in which
+    losses, residuals and errors are measured. Columns that are constant (to 1e-12 of the
+    data's magnitude) get scale 1."""
+    x = np.asarray(x, dtype=np.float64)
+    s = x.std(axis=0)
+    return np.where(s > 1e-12 * max(float(np.abs(x).max()), 1.0), s, 1.0)
+
+
 class Pairs(NamedTuple):
     """Training pairs :math:`(x_n, x_{n+1}, \\Delta t_n)` as arrays of equal length."""
 

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._model import GenericModel
+from ._model import GenericModel, float_dtype
 from .data import Trajectories
 from .integrate import AbstractScheme, CrankNicolson, solve
 
@@ -30,20 +30,13 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
     """
     ts, xs, lengths = data.padded()
-    dtype = _dtype(model)
+    dtype = float_dtype(model)
     out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme)
     return out, xs, lengths
 
 
-def _dtype(model):
-    import equinox as eqx
-
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
-    return leaves[0].dtype if leaves else jnp.zeros(()).dtype
-
-
 def _potential_along(model, fn, xs):
-    xs = jnp.asarray(xs, _dtype(model))
+    xs = jnp.asarray(xs, float_dtype(model))
     return np.asarray(jax.vmap(jax.vmap(fn))(xs), dtype=np.float64)
 
 
@@ -52,7 +45,7 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     x = np.asarray(x)
     if len(x) > max_states:
         x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
-    xj = jnp.asarray(x, _dtype(model))
+    xj = jnp.asarray(x, float_dtype(model))
     terms = jax.vmap(model.terms)(xj)
     f64 = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
     L, M = f64(terms.poisson), f64(terms.friction)

@@ -25,7 +25,7 @@ import jax.random as jr
 import numpy as np
 
 from ._errors import MetriplexError
-from ._model import GenericModel
+from ._model import GenericModel, float_dtype, with_dtype
 from .data import Trajectories
 
 MAGIC = b"METRIPLEX-MODEL\n"
@@ -342,11 +342,6 @@ def read_csv(path: Path) -> Trajectories:
 
 # -- model files ------------------------------------------------------------------------------
 
-def _dtype_of(model) -> str:
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
-    return str(leaves[0].dtype) if leaves else "float32"
-
-
 def save(path: str | os.PathLike, model: GenericModel, *, n: int, names=(), extra=None) -> None:
     """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle)."""
     from . import __version__
@@ -357,7 +352,7 @@ def save(path: str | os.PathLike, model: GenericModel, *, n: int, names=(), extr
         "library_version": __version__,
         "n": int(n),
         "names": list(names),
-        "dtype": _dtype_of(model),
+        "dtype": str(float_dtype(model, default=jnp.float32)),
         "model": model.spec(),
         "extra": extra or {},
     }
@@ -427,9 +422,7 @@ def load(path: str | os.PathLike) -> GenericModel:
                 "`jax.config.update('jax_enable_x64', True)`."
             )
         like = GenericModel.from_spec(header["model"], header["n"], key=jr.key(0))
-        like = jax.tree_util.tree_map(
-            lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, like
-        )
+        like = with_dtype(like, dtype)
         try:
             return eqx.tree_deserialise_leaves(f, like)
         except Exception as e:

@@ -18,12 +18,13 @@ import numpy as np
 
 from . import plots
 from ._errors import MetriplexError, TrainingDiverged
-from .config import RunConfig, build_loss, build_model, data_scale, validate
-from .data import Trajectories
+from ._model import with_dtype
+from .config import RunConfig, build_loss, build_model, validate
+from .data import Trajectories, state_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
-from .io import load, save, write_json
-from .train import History, fit
+from .io import save, write_json
+from .train import fit
 
 
 def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
@@ -70,10 +71,7 @@ def train_run(
     train, valid = data.split(config.validation, seed=config.seed)
     model_key, fit_key = jr.split(jr.key(config.seed))
     model = build_model(config, train, key=model_key)
-    model = jax.tree_util.tree_map(
-        lambda a: a.astype(dtype) if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating) else a,
-        model,
-    )
+    model = with_dtype(model, dtype)
     loss = build_loss(config)
     header = {
         "config": config.to_json(),
@@ -96,7 +94,7 @@ def train_run(
             validation=valid,
             eval_every=config.eval_every,
             patience=config.patience,
-            scale=data_scale(train),
+            scale=state_scale(train.x),
             dtype=dtype,
             progress=progress,
             checkpoint=str(out / "checkpoint.ckpt"),
@@ -175,7 +173,7 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
     plots.save_figure(plots.trajectories(ts, pred, obs, names), folder / "trajectories",
                       t=ts, learned=pred, observed=obs, names=np.array(names))
     err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
-    scale = np.where(data.x.std(axis=0) > 0, data.x.std(axis=0), 1.0)
+    scale = state_scale(data.x)
     per_var = np.abs(np.nan_to_num(pred, nan=np.inf) - obs) / scale[None, :]
     plots.save_figure(plots.error_over_time(ts, err, per_variable=dict(zip(names, per_var.T))),
                       folder / "error", t=ts, error=err, error_per_variable=per_var,
@@ -197,10 +195,3 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
     plots.save_figure(plots.energy_entropy(ts, E, S), folder / "energy_entropy", t=ts,
                       energy=E, entropy=S)
 
-
-def load_run(run_dir):
-    return load(run_dir)
-
-
-def history_of(run_dir) -> History:
-    return History.from_json(json.loads((Path(run_dir) / "history.json").read_text()))

@@ -23,8 +23,8 @@ from tqdm.auto import tqdm
 
 from . import _checkpoint
 from ._errors import MetriplexError, TrainingDiverged
-from ._model import GenericModel
-from .data import Pairs, Trajectories
+from ._model import GenericModel, float_dtype, with_dtype
+from .data import Pairs, Trajectories, state_scale
 from .integrate import model_size
 from .losses import Batch, CrankNicolsonResidual, Loss
 
@@ -249,15 +249,11 @@ def fit(
     if valid_pairs is not None:
         _check_pairs(valid_pairs, n, "validation")
     if dtype is None:
-        leaves = [x for x in jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))]
-        dtype = leaves[0].dtype if leaves else jnp.float32
+        dtype = float_dtype(model, default=jnp.float32)
     if scale is None:
-        s = train_pairs.x0.std(axis=0)
-        scale = np.where(s > 1e-12 * max(np.abs(train_pairs.x0).max(), 1.0), s, 1.0)
+        scale = state_scale(train_pairs.x0)
     scale = np.asarray(scale, dtype=np.float64)
-    model = jax.tree_util.tree_map(
-        lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, model
-    )
+    model = with_dtype(model, dtype)
 
     optimizer = default_optimizer(learning_rate, steps) if optimizer is None else optimizer
     params, static = eqx.partition(model, eqx.is_inexact_array)

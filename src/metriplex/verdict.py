@@ -35,9 +35,9 @@ import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
-from ._model import GenericModel, Terms
-from .data import Trajectories
-from .losses import Batch, CrankNicolsonResidual
+from ._model import GenericModel, Terms, float_dtype, with_dtype
+from .data import Trajectories, state_scale
+from .losses import CrankNicolsonResidual
 from .structure._mlp import Hidden, standardise
 from .structure.potential import ZeroPotential
 
@@ -89,11 +89,6 @@ def _residuals(model, pairs, scale, dtype) -> np.ndarray:
     return np.asarray(r, dtype=np.float64) / scale[None, :]
 
 
-def _dtype(model):
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
-    return leaves[0].dtype if leaves else jnp.zeros(()).dtype
-
-
 def verdict(
     model: GenericModel,
     data: Trajectories,
@@ -119,11 +114,10 @@ def verdict(
 
     train, valid = data.split(validation, seed=seed)
     held = valid if valid is not None else train
-    scale = train.x.std(axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
-    dtype = _dtype(model)
+    scale = state_scale(train.x)
+    dtype = float_dtype(model)
     box = BlackBoxModel(data.n, width=width, depth=depth, data=train.x, key=jr.key(seed))
-    box = jax.tree_util.tree_map(lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, box)
+    box = with_dtype(box, dtype)
     box, _ = fit(box, train, loss=CrankNicolsonResidual(), steps=steps, batch_size=batch_size,
                  learning_rate=learning_rate, validation=None, scale=scale, dtype=dtype,
                  progress=progress, key=jr.key(seed + 1))

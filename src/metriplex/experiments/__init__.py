@@ -23,6 +23,7 @@ import numpy as np
 
 from .. import plots
 from .._errors import MetriplexError
+from .._model import float_dtype, with_dtype
 from ..config import RunConfig, preset
 from ..diagnostics import error_over_time, evaluate, rollout_data, time_to_error
 from ..integrate import CrankNicolson, scheme_from_name
@@ -209,10 +210,7 @@ def _untrained_error(config: RunConfig, train, test, scheme, horizon) -> float:
     from ..config import build_model
 
     model = build_model(config, train, key=jr.split(jr.key(config.seed))[0])
-    model = jax.tree_util.tree_map(
-        lambda a: a.astype(jnp.float32) if hasattr(a, "dtype") and jnp.issubdtype(a.dtype, jnp.floating) else a,
-        model,
-    )
+    model = with_dtype(model, jnp.float32)
     r = evaluate(model, test, scheme=scheme, horizon=horizon)
     v = r["rollout_error_to_horizon_mean"] if horizon else r["rollout_error_mean"]
     return float(v) if math.isfinite(v) else float("inf")
@@ -230,7 +228,7 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
     """
     pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
-    dtype = jax.tree_util.tree_leaves(model)[0].dtype
+    dtype = float_dtype(model)
     slope = abs(fit["slope"])
     gauge, true = [], []
     for k, T in enumerate(lengths):
@@ -279,7 +277,7 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
     x_all = jnp.asarray(test.x)
-    dtype = jax.tree_util.tree_leaves(model)[0].dtype
+    dtype = float_dtype(model)
     E_l = np.asarray(jax.vmap(model.energy)(x_all.astype(dtype)), dtype=np.float64)
     S_l = np.asarray(jax.vmap(model.entropy)(x_all.astype(dtype)), dtype=np.float64)
     E_t = np.asarray(jax.vmap(system.model.energy)(x_all), dtype=np.float64)
