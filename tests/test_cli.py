@@ -79,6 +79,14 @@ def test_rollout_and_evaluate(oscillator_run):
     assert pred.names == data.names and len(pred) == len(data)
     np.testing.assert_array_equal(pred.t, data.t)
     np.testing.assert_allclose(pred.x[pred.t == 0], data.x[data.t == 0], rtol=1e-6)
+    # Newton instead of the default fixed-point-first solver: the same rollout to tolerance.
+    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred_newton.npz",
+              "--solver", "newton")
+    assert res.returncode == 0, res.stderr
+    np.testing.assert_allclose(mx.read(tmp / "pred_newton.npz").x, pred.x, rtol=1e-4, atol=1e-5)
+    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred_rk4.npz",
+              "--scheme", "rk4", "--solver", "newton")
+    assert_clean_error(res, r"--solver applies to the implicit schemes")
     res = run("evaluate", tmp / "run", tmp / "data.npz", "--out", tmp / "metrics.json")
     assert res.returncode == 0, res.stderr
     m = json.loads((tmp / "metrics.json").read_text())
@@ -172,3 +180,10 @@ def test_help_lists_commands():
     assert res.returncode == 0
     for cmd in ("simulate", "train", "rollout", "evaluate", "reproduce"):
         assert cmd in res.stdout
+
+
+def test_cli_solver_choices_match_the_library():
+    from metriplex.cli import _SOLVERS
+    from metriplex.integrate import SOLVERS
+
+    assert _SOLVERS == SOLVERS

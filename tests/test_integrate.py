@@ -100,7 +100,9 @@ def test_failed_step_is_reported_not_silent_nan(scheme):
     xs = np.asarray(out.xs)
     assert np.all(np.isfinite(xs[0, :3])) and np.all(np.isnan(xs[0, 3:]))
     its = np.asarray(out.iterations)
-    assert its[0, 3] == scheme.max_steps  # it tried
+    # It tried: the fixed-point iteration (which may stop early on overflow), then the whole
+    # Newton budget.
+    assert scheme.max_steps < its[0, 3] <= scheme.fixed_point_steps + scheme.max_steps
     assert np.all(its[0, 4:] == 0)  # and then stopped trying
     # The failed trajectory does not hold back the other one.
     assert np.all(np.isfinite(xs[1]))
@@ -155,18 +157,21 @@ def test_batched_equals_one_by_one_and_newton_stays_short():
     x0 = jnp.array([[0.6, -0.3], [0.1, 0.2], [-0.4, 0.0]])
     ts = jnp.stack([jnp.linspace(0.0, 3.0, 31), jnp.linspace(0.0, 1.0, 31),
                     jnp.concatenate([jnp.linspace(0.0, 2.0, 21), jnp.full((10,), 2.0)])])
-    batched = solve(ROTOR, x0, ts)
+    newton = CrankNicolson(solver="newton")
+    batched = solve(ROTOR, x0, ts, scheme=newton)
     assert np.asarray(batched.xs).shape == (3, 31, 2)
     for b in range(3):
-        one = solve(ROTOR, x0[b], ts[b])
+        one = solve(ROTOR, x0[b], ts[b], scheme=newton)
         np.testing.assert_allclose(np.asarray(batched.xs[b]), np.asarray(one.xs),
                                    rtol=1e-12, atol=1e-14)
         # Rounding may differ between the batched and single programs, not the Newton work.
         assert np.max(np.abs(np.asarray(batched.iterations[b]) - np.asarray(one.iterations))) <= 1
     # A shared grid broadcasts over the batch.
-    shared = solve(ROTOR, x0, ts[0])
-    np.testing.assert_allclose(np.asarray(shared.xs[1]), np.asarray(solve(ROTOR, x0[1], ts[0]).xs),
-                               rtol=1e-12, atol=1e-14)
+    shared = solve(ROTOR, x0, ts[0], scheme=newton)
+    np.testing.assert_allclose(
+        np.asarray(shared.xs[1]), np.asarray(solve(ROTOR, x0[1], ts[0], scheme=newton).xs),
+        rtol=1e-12, atol=1e-14,
+    )
     # Newton starts from the quadratic through the last three states (error O(dt^3)): after
     # two steps, at dt = 1/30, one update plus Optimistix's confirming iteration suffice.
     its = np.asarray(batched.iterations)
@@ -200,3 +205,46 @@ def test_bad_inputs_are_explained():
         solve(ROTOR, jnp.array([jnp.nan, 0.0]), jnp.array([0.0, 0.1]))
     with pytest.raises(mx.MetriplexError, match="2 grids for 3 initial states"):
         solve(ROTOR, jnp.zeros((3, 2)), jnp.zeros((2, 4)))
+
+
+#: Linear decay :math:`\dot x = -kx` as GENERIC (:math:`S = -x^2/2`, :math:`M = k`). With
+#: :math:`k\Delta t = 5` a fixed-point iteration of an implicit step diverges (its contraction
+#: factor is :math:`k\Delta t/2` for CN), so only Newton can take the step.
+def _minus_half_square(x):
+    return -0.5 * x[0] ** 2
+
+
+STIFF = mx.GenericModel(
+    mx.ZeroPotential(), mx.Known(_minus_half_square), mx.ZeroPoisson(1),
+    mx.KnownFriction(lambda x: 50.0 * jnp.ones((1, 1), x.dtype)),
+)
+TS_STIFF = jnp.linspace(0.0, 1.0, 11)  # k dt = 5
+
+
+def test_auto_solver_matches_newton_and_falls_back_where_the_fixed_point_diverges():
+    # Non-stiff: the fixed point alone converges, to Newton's solution.
+    x0 = jnp.array([[0.6, -0.3], [0.1, 0.2]])
+    ts = jnp.linspace(0.0, 3.0, 31)
+    auto = solve(ROTOR, x0, ts, scheme=CrankNicolson())
+    newton = solve(ROTOR, x0, ts, scheme=CrankNicolson(solver="newton"))
+    fixed = solve(ROTOR, x0, ts, scheme=CrankNicolson(solver="fixed-point"))
+    assert auto.ok and newton.ok and fixed.ok
+    np.testing.assert_allclose(np.asarray(auto.xs), np.asarray(newton.xs), rtol=0, atol=1e-13)
+    # Once the predictor has two past steps, no step needs Newton.
+    assert np.all(np.asarray(auto.iterations)[:, 3:] <= CrankNicolson().fixed_point_steps)
+    # Stiff: the fixed point fails, Newton takes over, and the step is exactly CN's.
+    x1 = jnp.array([[1.0], [0.5]])
+    fixed = solve(STIFF, x1, TS_STIFF, scheme=CrankNicolson(solver="fixed-point"))
+    assert np.asarray(fixed.failed_step).tolist() == [1, 1]
+    auto = solve(STIFF, x1, TS_STIFF, scheme=CrankNicolson())
+    assert auto.ok
+    its = np.asarray(auto.iterations)
+    assert np.all(its[:, 1:] > CrankNicolson().fixed_point_steps)  # Newton ran at every step
+    growth = (1 - 2.5) / (1 + 2.5)  # CN's amplification factor at k dt = 5
+    exact_cn = np.asarray(x1) * growth ** np.arange(11)[None, :]
+    np.testing.assert_allclose(np.asarray(auto.xs)[..., 0], exact_cn, rtol=1e-12, atol=1e-14)
+
+
+def test_unknown_solver_is_explained():
+    with pytest.raises(mx.MetriplexError, match="solver must be one of auto, newton"):
+        CrankNicolson(solver="bisection")

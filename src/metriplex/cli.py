@@ -12,6 +12,9 @@ from pathlib import Path
 
 from ._errors import MetriplexError
 
+#: integrate.SOLVERS, spelled out so that building the parser does not import JAX.
+_SOLVERS = ("auto", "newton", "fixed-point")
+
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 3
 
@@ -150,7 +153,8 @@ def cmd_rollout(args) -> None:
     model = load(args.run)
     data = read(args.data)
     check_names(args.run, data)
-    result, _, lengths = rollout_data(model, data, scheme=scheme_from_name(_scheme(args)))
+    scheme = scheme_from_name(_scheme(args), solver=args.solver)
+    result, _, lengths = rollout_data(model, data, scheme=scheme)
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
@@ -191,7 +195,8 @@ def cmd_evaluate(args) -> None:
     data = read(args.data)
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
-    metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon)
+    metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
+                           solver=args.solver)
     if not args.no_verdict:
         from .runs import run_config
         from .verdict import verdict
@@ -258,6 +263,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
                    "scheme the run was trained with)")
+    p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
+                   "iteration, Newton where it does not converge) | newton (stiff models) | "
+                   "fixed-point")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_rollout)
 
@@ -268,6 +276,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
     p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
                    "scheme the run was trained with)")
+    p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
+                   "iteration, Newton where it does not converge) | newton (stiff models) | "
+                   "fixed-point")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
     p.add_argument("--no-verdict", action="store_true",
                    help="skip the 'is it GENERIC?' verdict (it trains a black-box reference)")

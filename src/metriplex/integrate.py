@@ -1,5 +1,5 @@
-r"""Time stepping: implicit Crank–Nicolson, midpoint and discrete-gradient steps (Newton),
-explicit RK4, batched rollouts.
+r"""Time stepping: implicit Crank–Nicolson, midpoint and discrete-gradient steps (fixed-point
+iteration with a Newton fallback), explicit RK4, batched rollouts.
 
 Each scheme is a small object with two verbs:
 
@@ -8,8 +8,9 @@ Each scheme is a small object with two verbs:
   in units of ``dx/dt`` — zero when ``x1`` is exactly the scheme's step from ``x0``. Training
   minimises it, so the model is learned for the scheme that will roll it out.
 
-Implicit equations are solved with Optimistix's Newton method; a step that does not converge is
-reported (``Rollout.failed_step``), never passed on as a silent NaN.
+Implicit equations are solved with Optimistix (fixed-point iteration, and Newton's method where
+that does not converge; see ``solver``); a step that does not converge is reported
+(``Rollout.failed_step``), never passed on as a silent NaN.
 
 Which scheme keeps what (for any model, to solver tolerance):
 
@@ -54,6 +55,10 @@ class AbstractScheme(eqx.Module):
     def step(self, model: GenericModel, x: State, dt, guess: State):
         """Return ``(x_next, converged, iterations)``."""
 
+    def step_batch(self, model: GenericModel, x, dt, guess):
+        """:meth:`step` for a batch of states ``x`` ``(B, n)``, steps ``dt`` ``(B,)``."""
+        return jax.vmap(lambda x, dt, g: self.step(model, x, dt, g))(x, dt, guess)
+
     @abc.abstractmethod
     def residual(self, model, x0, x1, dt, terms0: Terms, terms1: Terms) -> State: ...
 
@@ -79,17 +84,62 @@ class RK4(AbstractScheme):
         return (x1 - self.advance(model, x0, dt)) / dt
 
 
+class _FixedPointIteration(optx.FixedPointIteration):
+    """Optimistix's fixed-point iteration, with its error estimate in the state's dtype.
+
+    Upstream starts the estimate as ``jnp.array(inf)``, which is float64 when x64 is enabled;
+    a float32 state then changes the loop carry's dtype and the solve fails to trace.
+    """
+
+    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+        state = super().init(fn, y, args, options, f_struct, aux_struct, tags)
+        return type(state)(jnp.array(jnp.inf, jnp.result_type(y)))
+
+
+SOLVERS = ("auto", "newton", "fixed-point")
+
+
 class _Implicit(AbstractScheme):
-    """A step :math:`x_1 = x_0 + \\Delta t\\,\\bar f(x_0, x_1)` solved by Newton's method.
+    r"""A step :math:`x_1 = x_0 + \Delta t\,\bar f(x_0, x_1)`, solved by fixed-point iteration
+    or Newton's method.
+
+    ``solver``:
+
+    - ``"auto"`` (default): fixed-point iteration :math:`x_1 \leftarrow x_0 + \Delta t\,\bar
+      f(x_0, x_1)` from the rollout's predictor, at most ``fixed_point_steps`` iterations;
+      **Newton** for the steps where it does not converge (in a batched rollout, one batched
+      Newton solve whenever any trajectory needs it). A fixed-point iteration costs one
+      evaluation of the vector field; a Newton iteration also builds its :math:`n\times n`
+      Jacobian (``n`` forward-mode products through the model) and solves with it, about 4-6x
+      more on the reference models. For non-stiff steps (:math:`\Delta t\,\|\partial\bar
+      f/\partial x_1\| < 1`) the fixed point converges in a few iterations.
+    - ``"newton"``: Newton only (stiff models, e.g. fast heat conduction, where the fixed
+      point diverges at every step and the fallback would only add work).
+    - ``"fixed-point"``: fixed-point iteration only; a step where it does not converge fails.
+
+    The fixed-point iteration stops when its update is below a hundredth of the tolerance (but
+    no tighter than 8 machine epsilons): it converges linearly, so its error is a multiple of
+    its last update, while Newton's error is far below its last update. With that, both give
+    about the same accuracy (pendulum, 64 trajectories x 1000 steps: float32 relative error
+    against a tight reference 6e-7 at t = 10 for both; float64 discrete-gradient energy drift
+    6e-14 vs 1e-14 for Newton).
 
     Subclasses give the scheme's average of the vector field, :meth:`average`, and may compute
     once per step, in :meth:`start`, whatever of it depends on ``x0`` only (it is then not
-    re-evaluated at every Newton iteration).
+    re-evaluated at every iteration).
     """
 
     rtol: float | None = None
     atol: float | None = None
     max_steps: int = 32
+    solver: str = "auto"
+    fixed_point_steps: int = 16
+
+    def __check_init__(self):
+        if self.solver not in SOLVERS:
+            raise MetriplexError(
+                f"solver must be one of {', '.join(SOLVERS)}; got {self.solver!r}."
+            )
 
     def start(self, model, x0) -> Any:
         """The part of the average that depends on ``x0`` alone (default: nothing)."""
@@ -102,7 +152,7 @@ class _Implicit(AbstractScheme):
     def increment(self, model, x0, x1) -> State:
         return self.average(model, x0, x1, self.start(model, x0))
 
-    def step(self, model, x, dt, guess):
+    def _newton(self, model, x, dt, guess):
         def fn(y, args):
             x0, dt, pre = args
             return y - x0 - dt * self.average(model, x0, y, pre)
@@ -112,9 +162,52 @@ class _Implicit(AbstractScheme):
         )
         args = (x, dt, self.start(model, x))
         sol = optx.root_find(fn, solver, guess, args, max_steps=self.max_steps, throw=False)
-        y = sol.value
-        ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(y))
-        return y, ok, sol.stats["num_steps"]
+        return _outcome(sol)
+
+    def _fixed_point(self, model, x, dt, guess):
+        def fn(y, args):
+            x0, dt, pre = args
+            return x0 + dt * self.average(model, x0, y, pre)
+
+        solver = _FixedPointIteration(
+            rtol=_fixed_point_tolerance(self.rtol, x.dtype),
+            atol=_fixed_point_tolerance(self.atol, x.dtype),
+        )
+        args = (x, dt, self.start(model, x))
+        steps = self.fixed_point_steps if self.solver == "auto" else self.max_steps
+        sol = optx.fixed_point(fn, solver, guess, args, max_steps=steps, throw=False)
+        return _outcome(sol)
+
+    def step(self, model, x, dt, guess):
+        y, ok, its = self.step_batch(model, x[None], jnp.asarray(dt)[None], guess[None])
+        return y[0], ok[0], its[0]
+
+    def step_batch(self, model, x, dt, guess):
+        newton = jax.vmap(lambda x, dt, g: self._newton(model, x, dt, g))
+        if self.solver == "newton":
+            return newton(x, dt, guess)
+        first = jax.vmap(lambda x, dt, g: self._fixed_point(model, x, dt, g))(x, dt, guess)
+        if self.solver == "fixed-point":
+            return first
+
+        def fallback(first):
+            y, ok, its = first
+            y2, ok2, its2 = newton(x, dt, guess)
+            return jnp.where(ok[:, None], y, y2), ok | ok2, its + jnp.where(ok, 0, its2)
+
+        # An unbatched predicate: Newton runs only at steps where some trajectory needs it.
+        return jax.lax.cond(jnp.any(~first[1]), fallback, lambda first: first, first)
+
+
+def _fixed_point_tolerance(value: float | None, dtype) -> float:
+    """A tenth of a tolerance the user gave; by default, 8 machine epsilons (rounding level)."""
+    return 0.1 * value if value is not None else 8 * float(jnp.finfo(dtype).eps)
+
+
+def _outcome(sol):
+    y = sol.value
+    ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(y))
+    return y, ok, sol.stats["num_steps"]
 
 
 class CrankNicolson(_Implicit):
@@ -272,12 +365,22 @@ SCHEMES: dict[str, type[AbstractScheme]] = {
 }
 
 
-def scheme_from_name(name: str) -> AbstractScheme:
+def scheme_from_name(name: str, *, solver: str | None = None) -> AbstractScheme:
+    """The scheme called ``name``; ``solver`` (``auto``, ``newton``, ``fixed-point``) for an
+    implicit one (default ``auto``)."""
     if name not in SCHEMES:
         raise MetriplexError(
             f"unknown time-stepping scheme {name!r}; choose one of {sorted(SCHEMES)}."
         )
-    return SCHEMES[name]()
+    cls = SCHEMES[name]
+    if solver is None:
+        return cls()
+    if not issubclass(cls, _Implicit):
+        raise MetriplexError(
+            f"--solver applies to the implicit schemes (cn, midpoint, discrete-gradient); "
+            f"{name!r} is explicit. Leave --solver out."
+        )
+    return cls(solver=solver)
 
 
 class Rollout(NamedTuple):
@@ -313,40 +416,52 @@ def _predict(x, d1, h1, d2, h2, h):
 
 
 def _rollout(model, scheme, x0, ts):
-    dts = jnp.diff(ts)
-    zero = jnp.zeros((), x0.dtype)
+    """Roll out a batch: ``x0`` ``(B, n)``, ``ts`` ``(B, T)``; the scan runs over time and each
+    step advances the whole batch at once (so the scheme can decide per step, for the batch,
+    whether Newton is needed)."""
+    dts = jnp.diff(ts, axis=-1).T  # (T - 1, B)
+    zero = jnp.zeros(x0.shape[:1], x0.dtype)
 
     def body(carry, dt):
         x, d1, h1, d2, h2, failed = carry
-        # A failed trajectory takes zero steps from here on: its Newton solves end at once.
-        h = jnp.where(failed, zero, dt)
-        guess = _predict(x, d1, h1, d2, h2, h)
-        y, ok, its = scheme.step(model, x, h, guess)
+        # A failed trajectory takes zero steps from here on: its solves end at once.
+        h = jnp.where(failed, 0.0, dt)
+        guess = jax.vmap(_predict)(x, d1, h1, d2, h2, h)
+        y, ok, its = scheme.step_batch(model, x, h, guess)
         moved = h > 0
         bad = failed | (moved & ~ok)
-        y = jnp.where(moved, y, x)  # a zero step keeps the state exactly
-        x_new = jnp.where(bad, x, y)
+        y = jnp.where(moved[:, None], y, x)  # a zero step keeps the state exactly
+        x_new = jnp.where(bad[:, None], x, y)
         advance = moved & ~bad
+        a = advance[:, None]
         carry = (
             x_new,
-            jnp.where(advance, y - x, d1),
+            jnp.where(a, y - x, d1),
             jnp.where(advance, h, h1),
-            jnp.where(advance, d1, d2),
+            jnp.where(a, d1, d2),
             jnp.where(advance, h1, h2),
             bad,
         )
-        return carry, (jnp.where(bad, jnp.nan, y), bad, jnp.where(failed, 0, its))
+        its = jnp.where(failed, 0, jnp.asarray(its, jnp.asarray(0).dtype))
+        return carry, (jnp.where(bad[:, None], jnp.nan, y), bad, its)
 
-    init = (x0, jnp.zeros_like(x0), zero, jnp.zeros_like(x0), zero, jnp.array(False))
+    no = jnp.zeros(x0.shape[:1], bool)
+    init = (x0, jnp.zeros_like(x0), zero, jnp.zeros_like(x0), zero, no)
     _, (xs, bad, its) = jax.lax.scan(body, init, dts)
-    xs = jnp.concatenate([x0[None], xs])
-    bad = jnp.concatenate([jnp.array([False]), bad])
-    failed_step = jnp.where(jnp.any(bad), jnp.argmax(bad), -1)
-    return xs, failed_step, jnp.concatenate([jnp.array([0]), its])
+    xs = jnp.concatenate([x0[:, None], jnp.swapaxes(xs, 0, 1)], axis=1)
+    bad = jnp.concatenate([no[:, None], bad.T], axis=1)
+    failed_step = jnp.where(jnp.any(bad, axis=1), jnp.argmax(bad, axis=1), -1)
+    its = jnp.concatenate([jnp.zeros_like(its[:1]).T, its.T], axis=1)
+    return xs, failed_step, its
 
 
-_rollout_one = eqx.filter_jit(_rollout)
-_rollout_batch = eqx.filter_jit(eqx.filter_vmap(_rollout, in_axes=(None, None, 0, 0)))
+@eqx.filter_jit
+def _rollout_one(model, scheme, x0, ts):
+    xs, failed, its = _rollout(model, scheme, x0[None], ts[None])
+    return xs[0], failed[0], its[0]
+
+
+_rollout_batch = eqx.filter_jit(_rollout)
 
 
 def _check_inputs(x0, ts, n):

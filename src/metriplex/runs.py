@@ -151,20 +151,22 @@ def check_names(run_dir, data: Trajectories) -> None:
 
 
 def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path | None = None,
-                 horizon: float | None = None) -> dict:
+                 horizon: float | None = None, solver: str | None = None) -> dict:
     """Metrics on ``data`` and, if ``figures`` is given, the standard figure set."""
-    sch = scheme_from_name(scheme)
+    sch = scheme_from_name(scheme, solver=solver)
     report = evaluate(model, data, scheme=sch, horizon=horizon)
     if figures is not None:
-        report_figures(model, data, figures, scheme=scheme)
+        report_figures(model, data, figures, scheme=scheme, solver=solver)
     return report
 
 
-def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0):
+def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
+                   solver: str | None = None):
     """The report figure set for trajectory ``k`` of ``data``: trajectories (model vs data),
     overall and per-variable rollout error over time, the one-step residual of every observed
     pair over time, and the learned E and S along the rollout."""
-    out, xs, lengths = rollout_data(model, data, scheme=scheme_from_name(scheme))
+    sch = scheme_from_name(scheme, solver=solver)
+    out, xs, lengths = rollout_data(model, data, scheme=sch)
     T = int(lengths[k])
     ts = np.asarray(out.ts)[k, :T]
     pred = np.asarray(out.xs)[k, :T]
@@ -183,7 +185,6 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
     dtype = out.xs.dtype
     x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
     dt = jnp.asarray(np.diff(tk), dtype)
-    sch = scheme_from_name(scheme)
     t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
     res = jax.vmap(sch.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
     res = np.asarray(res, dtype=np.float64) / scale[None, :]
