@@ -24,7 +24,7 @@ def test_benchmark_suite_quick(tmp_path):
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = proc.stdout
     for header in ("### Machine", "### Training step", "| dtype | batch | Jacobi | cpu ms/step",
-                   "### Rollouts", "| model | trajectories × steps | cpu s", "### Memory",
+                   "### Rollouts", "| model | trajectories × steps | solver | cpu s", "### Memory",
                    "### Time to accuracy"):
         assert header in out, f"missing {header!r} in:\n{out}"
     results = json.loads((tmp_path / "results.json").read_text())

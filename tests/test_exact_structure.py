@@ -260,7 +260,24 @@ def _all_models():
         ),
         "casimir3": _model3(CasimirPoisson3(width=16, scaling=SCALING3, key=k[4])),
         "casimir3-entropy": _model3(EntropyCasimirPoisson3(width=16, depth=1, key=k[5])),
+        "friction-features": _pendulum_model(exact=False),
+        "projected-friction-features": _pendulum_model(exact=True),
     }
+
+
+def _pendulum_model(exact: bool):
+    from metriplex.config import FEATURES
+
+    feats = FEATURES["pendulum"]
+    data = np.asarray(jr.normal(jr.key(35), (64, 10)))
+    cls = ProjectedCholeskyFriction if exact else mx.CholeskyFriction
+    k = jr.split(jr.key(36), 2)
+    return mx.GenericModel(
+        energy=MLPPotential(10, width=16, features=feats, data=data, key=k[0]),
+        entropy=mx.SumOf((8, 9)),
+        poisson=mx.CanonicalPoisson(10, 4),
+        friction=cls(10, width=16, features=feats, data=data, key=k[1]),
+    )
 
 
 def _predict(model, n):

@@ -47,6 +47,25 @@ def test_learned_friction_is_symmetric_psd(n):
     np.testing.assert_array_equal(B, np.tril(B))
 
 
+def test_friction_on_invariant_features_is_psd_and_invariant():
+    from metriplex.config import FEATURES
+
+    x = _states(10)
+    M = mx.CholeskyFriction(10, width=16, features=FEATURES["pendulum"], data=x, key=jr.key(4))
+    Ms = np.asarray(jax.vmap(lambda x: M(x, None))(x))
+    np.testing.assert_allclose(Ms, np.swapaxes(Ms, 1, 2), atol=1e-15)
+    assert np.linalg.eigvalsh(Ms).min() >= -1e-12 * np.abs(Ms).max()
+    # Rotating all positions and momenta in the plane leaves the features, hence M, unchanged.
+    c, s = np.cos(0.7), np.sin(0.7)
+    R = np.kron(np.eye(4), np.array([[c, -s], [s, c]]))
+    xr = np.concatenate([np.asarray(x)[:, :8] @ R.T, np.asarray(x)[:, 8:]], axis=1)
+    np.testing.assert_allclose(np.asarray(jax.vmap(lambda x: M(x, None))(jnp.asarray(xr))), Ms,
+                               rtol=1e-10, atol=1e-13)
+    # The input statistics are those of the features, so the network sees O(1) inputs.
+    z = np.asarray(jax.vmap(FEATURES["pendulum"])(x))
+    np.testing.assert_allclose(M.input_stats[0], z.mean(0), rtol=1e-12)
+
+
 def test_canonical_poisson_layout_and_errors():
     L = np.asarray(mx.CanonicalPoisson(10, 4)(jnp.zeros(10), None))
     assert L[0, 4] == 1.0 and L[4, 0] == -1.0 and L[3, 7] == 1.0

@@ -32,6 +32,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--jacobi", help="none | exact | stochastic (Jacobi-identity penalty)")
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
+    g.add_argument("--features-for", help="networks that see the features: a comma list of "
+                   f"energy, entropy, friction (default {d.features_for})")
     g.add_argument("--scheme", help="training residual scheme: cn (default) | midpoint | "
                    "discrete-gradient | rk4")
     w = p.add_argument_group("loss weights and optimisation")

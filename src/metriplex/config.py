@@ -18,7 +18,7 @@ from .data import Trajectories
 from .integrate import scheme_from_name
 from .losses import FrictionDegeneracy, JacobiPenalty, Loss, PoissonDegeneracy, SchemeResidual
 from .structure import _registry
-from .structure.friction import ZeroFriction
+from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
 from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
 from .structure.scaling import Scaling
@@ -44,6 +44,7 @@ class RunConfig:
     jacobi: str = "none"
     jacobi_probes: int = 1
     features: str = "none"
+    features_for: str = "energy,entropy"
     scheme: str = "cn"
     w_traj: float = 1.0
     w_degeneracy_L: float = 10.0
@@ -133,6 +134,7 @@ def validate(config: RunConfig, n: int) -> None:
         )
     if config.features != "none":
         FEATURES[config.features].check(n)
+    _feature_blocks(config)
     scheme_from_name(config.scheme)
     for name in ("width", "depth", "steps", "batch_size", "eval_every"):
         v = getattr(config, name)
@@ -147,6 +149,22 @@ def validate(config: RunConfig, n: int) -> None:
             raise MetriplexError(f"loss weight {name} must be >= 0; got {getattr(config, name)}.")
 
 
+FEATURE_BLOCKS = ("energy", "entropy", "friction")
+
+
+def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
+    blocks = tuple(b.strip() for b in config.features_for.split(",") if b.strip())
+    bad = [b for b in blocks if b not in FEATURE_BLOCKS]
+    if bad:
+        hint = (" The entries of L are not invariant functions of the state, so invariant "
+                "features do not apply to it." if "poisson" in bad else "")
+        raise MetriplexError(
+            f"--features-for lists the networks that see the features, from "
+            f"{', '.join(FEATURE_BLOCKS)}; got {config.features_for!r}.{hint}"
+        )
+    return blocks
+
+
 def build_model(config: RunConfig, data: Trajectories, *, key) -> GenericModel:
     """The untrained model that ``config`` describes, normalised to ``data``'s scales."""
     n = data.n
@@ -155,9 +173,11 @@ def build_model(config: RunConfig, data: Trajectories, *, key) -> GenericModel:
     kE, kS, kL, kM = jr.split(key, 4)
     net = dict(width=config.width, depth=config.depth, activation=config.activation)
     features = FEATURES.get(config.features)
-    energy = MLPPotential(n, features=features, data=x, key=kE, **net)
+    blocks = _feature_blocks(config)
+    feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
+    energy = MLPPotential(n, features=feats["energy"], data=x, key=kE, **net)
     if config.entropy == "neural":
-        entropy = MLPPotential(n, features=features, data=x, key=kS, **net)
+        entropy = MLPPotential(n, features=feats["entropy"], data=x, key=kS, **net)
     elif config.entropy == "zero":
         entropy = ZeroPotential()
     else:
@@ -175,8 +195,8 @@ def build_model(config: RunConfig, data: Trajectories, *, key) -> GenericModel:
     else:
         poisson = CanonicalPoisson(n, int(config.poisson.partition(":")[2]))
     if config.friction == "neural":
-        spec = {"kind": "projected-mlp" if exact else "mlp", **net, "scaling": scaling.to_json()}
-        friction = _registry.from_spec("friction", spec, n, key=kM)
+        cls = ProjectedCholeskyFriction if exact else CholeskyFriction
+        friction = cls(n, **net, scaling=scaling, features=feats["friction"], data=x, key=kM)
     else:
         friction = ZeroFriction(n)
     return GenericModel(energy, entropy, poisson, friction)
@@ -207,7 +227,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     ),
     "pendulum-energetic": dict(
         energy="neural", entropy="sum:8,9", poisson="canonical:4", friction="neural",
-        features="pendulum", width=64, depth=2, lr=1e-2, batch_size=256,
+        features="pendulum", features_for="energy,friction", width=64, depth=2, lr=1e-2,
+        batch_size=256,
         scheme="discrete-gradient",
     ),
     "pendulum-temperature": dict(

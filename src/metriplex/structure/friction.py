@@ -10,14 +10,17 @@ import abc
 from typing import Any, Callable
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import jax.random as jr
+import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Matrix, State
-from ._mlp import FoldedHead, Hidden, standardise
+from ._mlp import FoldedHead, Hidden, data_statistics, standardise
 from ._registry import network_kwargs, not_serialisable, register
 from .poisson import _check_eps, _default_eps, _projector_vectors
+from .potential import FeatureMap
 from .scaling import Scaling
 
 
@@ -37,12 +40,20 @@ class CholeskyFriction(AbstractFriction):
 
     :math:`B` has :math:`n(n+1)/2` network outputs; :math:`M` is symmetric and positive
     semi-definite for any weights. With a scaling, :math:`M = D\tilde B\tilde B^\top D^\top`.
+
+    The network sees the standardised state, or, with ``features``, the standardised features
+    of the state (statistics from ``data``). Invariant features (such as the pendulum's squared
+    lengths) suit a friction whose entries are invariant functions of the state, e.g. heat
+    conduction that depends only on the temperatures; the matrix itself is still indexed by the
+    state's components.
     """
 
     hidden: Hidden
     head: FoldedHead
     n: int = eqx.field(static=True)
     scaling: Scaling | None = eqx.field(static=True)
+    features: FeatureMap | None
+    input_stats: tuple[tuple[float, ...], tuple[float, ...]] | None = eqx.field(static=True)
 
     def __init__(
         self,
@@ -52,22 +63,42 @@ class CholeskyFriction(AbstractFriction):
         depth: int = 2,
         activation: str = "softplus",
         scaling: Scaling | None = None,
+        features: FeatureMap | None = None,
+        data=None,
+        input_stats=None,
         key,
     ):
         if n < 1:
             raise MetriplexError(f"a friction matrix needs n >= 1 variables; got {n}.")
         self.n = n
         self.scaling = scaling
+        self.features = features
+        if features is not None:
+            features.check(n)
+            if data is not None and input_stats is None:
+                z = jax.vmap(features)(jnp.asarray(np.asarray(data)))
+                input_stats = data_statistics(np.asarray(z))
+        self.input_stats = (
+            None if input_stats is None
+            else tuple(tuple(float(v) for v in part) for part in input_stats)
+        )
         hkey, okey = jr.split(key)
-        self.hidden = Hidden(n, width, depth, activation, key=hkey)
+        in_size = n if features is None else features.size
+        self.hidden = Hidden(in_size, width, depth, activation, key=hkey)
         rs = None if scaling is None else scaling.row_scale("lower")
         # Small initial B: training starts close to reversible dynamics.
         self.head = FoldedHead(width, n, "lower", rs, 0.1, key=okey)
 
-    def factor(self, x: State) -> Matrix:
+    def _inputs(self, x: State):
+        if self.features is not None:
+            stats = self.input_stats
+            z = self.features(x)
+            return z if stats is None else standardise(z, stats[0], stats[1])
         s = self.scaling
-        z = x if s is None else standardise(x, s.shift, s.scale)
-        return self.head(self.hidden(z))
+        return x if s is None else standardise(x, s.shift, s.scale)
+
+    def factor(self, x: State) -> Matrix:
+        return self.head(self.hidden(self._inputs(x)))
 
     def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
         B = self.factor(x)
@@ -80,15 +111,22 @@ class CholeskyFriction(AbstractFriction):
             "depth": len(self.hidden.layers),
             "activation": self.hidden.activation,
             "scaling": None if self.scaling is None else self.scaling.to_json(),
+            "features": None if self.features is None else self.features.to_json(),
+            "input_stats": None if self.input_stats is None else [list(v) for v in
+                                                                   self.input_stats],
         }
 
     @classmethod
     def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            key=key,
-        )
+        return cls(n, **network_kwargs(spec), **_feature_kwargs(spec), key=key)
+
+
+def _feature_kwargs(spec) -> dict[str, Any]:
+    feats = spec.get("features")
+    return {
+        "features": None if feats is None else FeatureMap(**feats),
+        "input_stats": spec.get("input_stats"),
+    }
 
 
 @register("friction", "zero")
@@ -155,12 +193,16 @@ class ProjectedCholeskyFriction(AbstractFriction):
         depth: int = 2,
         activation: str = "softplus",
         scaling: Scaling | None = None,
+        features: FeatureMap | None = None,
+        data=None,
+        input_stats=None,
         eps: float | None = None,
         key,
     ):
         _check_eps(eps)
         self.base = CholeskyFriction(
-            n, width=width, depth=depth, activation=activation, scaling=scaling, key=key
+            n, width=width, depth=depth, activation=activation, scaling=scaling,
+            features=features, data=data, input_stats=input_stats, key=key,
         )
         self.n = n
         self.eps = None if eps is None else float(eps)
@@ -186,9 +228,5 @@ class ProjectedCholeskyFriction(AbstractFriction):
 
     @classmethod
     def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            eps=spec.get("eps"),
-            key=key,
-        )
+        return cls(n, **network_kwargs(spec), **_feature_kwargs(spec), eps=spec.get("eps"),
+                   key=key)
