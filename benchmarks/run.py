@@ -49,6 +49,7 @@ if _THREADS == 1:
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import glob  # noqa: E402
+import itertools  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
 import platform  # noqa: E402
@@ -314,31 +315,32 @@ def bench_rollout(args) -> list[dict]:
         if name not in args.rollout_models:
             continue
         model = with_dtype(model, jnp.float32)
-        for k in args.rollout_batches:
+        for k, solver in itertools.product(args.rollout_batches, args.rollout_solvers):
             x0 = jnp.asarray(x0_all[0] if k == 1 else x0_all[:k], jnp.float32)
+            scheme = mx.CrankNicolson(solver=solver)
             t0 = time.perf_counter()
-            out = mx.solve(model, x0, ts)
+            out = mx.solve(model, x0, ts, scheme=scheme)
             jax.block_until_ready(out.xs)
             first = time.perf_counter() - t0
             wall, cpu = [], []
             for _ in range(args.rollout_repeats):
                 w0, c0 = time.perf_counter(), time.process_time()
-                out = mx.solve(model, x0, ts)
+                out = mx.solve(model, x0, ts, scheme=scheme)
                 jax.block_until_ready(out.xs)
                 wall.append(time.perf_counter() - w0)
                 cpu.append(time.process_time() - c0)
             its = np.asarray(out.iterations)
             row = dict(
                 model=name, trajectories=k, steps=args.rollout_steps, dtype="float32",
-                cpu_s=statistics.median(cpu), wall_s=statistics.median(wall),
+                solver=solver, cpu_s=statistics.median(cpu), wall_s=statistics.median(wall),
                 first_call_s=first, ok=bool(out.ok),
-                newton_iterations_mean=float(its[..., 1:].mean()),
+                iterations_mean=float(its[..., 1:].mean()),
             )
             rows.append(row)
-            print(f"  rollout {name:<13} {k:>3} x {args.rollout_steps} steps: "
+            print(f"  rollout {name:<13} {k:>3} x {args.rollout_steps} steps, {solver:<6}: "
                   f"{row['cpu_s']:.3f} cpu s, {row['wall_s']:.3f} wall s "
-                  f"(first call {first:.1f} s, {row['newton_iterations_mean']:.2f} Newton "
-                  f"its/step, ok={row['ok']})", flush=True)
+                  f"(first call {first:.1f} s, {row['iterations_mean']:.2f} "
+                  f"iterations/step, ok={row['ok']})", flush=True)
     return rows
 
 
@@ -386,7 +388,8 @@ def _lookup(results, key):
     else:
         _, model, k = key
         for r in results["rollout"]:
-            if (r["model"], r["trajectories"]) == (model, k) and r["steps"] == 1000:
+            if ((r["model"], r["trajectories"], r.get("solver", "newton")) == (model, k, "auto")
+                    and r["steps"] == 1000):
                 return r["cpu_s"], r["wall_s"]
     return None
 
@@ -471,14 +474,17 @@ def report(results) -> str:
                 f"{_fmt(util, '.0%')} | {_fmt(mem, '.1f')} |"
             )
         parts.append("")
-    parts.append("### Rollouts (metriplex.solve, Crank–Nicolson with Newton, float32)\n")
-    parts.append("| model | trajectories × steps | cpu s | wall s | first call s (compile) | "
-                 "Newton its/step | ok |")
-    parts.append("|---|---|---|---|---|---|---|")
+    parts.append("### Rollouts (metriplex.solve, Crank–Nicolson, float32)\n")
+    parts.append("`auto` (the default): fixed-point iteration, Newton only where it does not "
+                 "converge; `newton`: Newton at every step.\n")
+    parts.append("| model | trajectories × steps | solver | cpu s | wall s | "
+                 "first call s (compile) | iterations/step | ok |")
+    parts.append("|---|---|---|---|---|---|---|---|")
     for r in results["rollout"]:
-        parts.append(f"| {r['model']} | {r['trajectories']} × {r['steps']} | {r['cpu_s']:.3f} | "
-                     f"{r['wall_s']:.3f} | {r['first_call_s']:.1f} | "
-                     f"{r['newton_iterations_mean']:.2f} | {r['ok']} |")
+        its = r.get("iterations_mean", r.get("newton_iterations_mean"))
+        parts.append(f"| {r['model']} | {r['trajectories']} × {r['steps']} | "
+                     f"{r.get('solver', 'newton')} | {r['cpu_s']:.3f} | "
+                     f"{r['wall_s']:.3f} | {r['first_call_s']:.1f} | {its:.2f} | {r['ok']} |")
     parts.append("")
     parts.append("### Memory\n")
     mem = results["memory"]
@@ -560,6 +566,7 @@ def main(argv=None) -> int:
     args.rollout_models = ["ground-truth"] if q else ["ground-truth", "learned-size"]
     args.rollout_steps = 20 if q else 1000
     args.rollout_repeats = 2 if q else 5
+    args.rollout_solvers = ["auto"] if q else ["newton", "auto"]
     out = args.out or ROOT / "benchmarks"
     docs = args.docs or (None if q else ROOT / "docs" / "performance.md")
     if args.report_only is not None:
