@@ -248,3 +248,20 @@ def test_auto_solver_matches_newton_and_falls_back_where_the_fixed_point_diverge
 def test_unknown_solver_is_explained():
     with pytest.raises(mx.MetriplexError, match="solver must be one of auto, newton"):
         CrankNicolson(solver="bisection")
+
+
+def test_error_to_horizon_ignores_a_failure_after_the_horizon():
+    # Trajectory 0 blows up between t = 1 and t = 8 (its implicit step fails there); up to
+    # t = 1 its states exist and match the exact solution to the scheme's error.
+    x0 = np.array([0.1, 0.01])
+    ts = np.asarray(TS_BLOW_UP)
+    xs = x0[:, None] / (1.0 - x0[:, None] * ts[None, :])
+    xs[0, 3:] = xs[0, 2]  # the exact solution is gone too (it blows up at t = 10)
+    data = mx.Trajectories.from_list([(ts, xs[b][:, None]) for b in range(2)], ["x"])
+    report = mx.evaluate(BLOW_UP, data, horizon=1.0)
+    assert report["rollout_failures"] == 1
+    assert report["rollout_error"][0] == float("inf")
+    assert report["rollout_error_to_horizon"][0] < 1e-3
+    assert np.isfinite(report["rollout_error_to_horizon_mean"])
+    # A failure within the horizon still counts as an infinite error there.
+    assert mx.evaluate(BLOW_UP, data, horizon=8.0)["rollout_error_to_horizon"][0] == float("inf")
