@@ -410,11 +410,12 @@ REASONS = {
         "0.83 MFLOP/sample at only ~22 GFLOP/s: per-sample 10x10 products of the probes and "
         "~1.5 ms/step of threefry normals"),
     "64 trajectories x 1000 CN steps, learned-size model": (
-        "1.0 Newton iteration per step, ~17 us per trajectory-step: each iteration builds the "
-        "dense Jacobian (jacfwd, n tangents) of the learned field, i.e. second derivatives of "
-        "the networks; integrate.py, see the suggestions"),
+        "with solver=auto ~1 fixed-point iteration per step, i.e. one evaluation of the "
+        "learned field (a gradient through the energy network plus the friction network) for "
+        "64 states, ~4.5 us per trajectory-step, 1000 steps in sequence; Newton (4x slower) "
+        "builds a dense Jacobian of that field each step"),
     "64 trajectories x 1000 CN steps, pendulum ground truth": (
-        "1000 sequential Newton solves (2 iterations per step)"),
+        "1000 sequential implicit solves"),
 }
 
 
@@ -434,6 +435,28 @@ def targets_table(results) -> tuple[str, list[dict]]:
     return "\n".join(lines), out
 
 
+def _row_key(section: str, r: dict) -> tuple:
+    if section == "training":
+        return (r["model"], r["jacobi"], r["batch"], r["dtype"])
+    return (r["model"], r["trajectories"], r["steps"], r.get("solver", "newton"))
+
+
+def merge(results: dict, earlier: dict) -> None:
+    """Keep the rows of ``earlier`` that this run did not re-measure (in their old order)."""
+    for section in ("training", "rollout"):
+        new = {_row_key(section, r): r for r in results[section]}
+        kept = []
+        for r in earlier.get(section, []):
+            key = _row_key(section, r)
+            if key in new:
+                kept.append(new.pop(key))
+            else:
+                kept.append({**r, "run": r.get("run", earlier["machine"]["date"])})
+        results[section] = kept + list(new.values())
+    results["merged_from"] = [earlier["machine"]["date"], *earlier.get("merged_from", [])]
+    results["command"] += f" (other rows from the run of {earlier['machine']['date']})"
+
+
 def report(results) -> str:
     m = results["machine"]
     parts = []
@@ -448,6 +471,14 @@ def report(results) -> str:
         f"**{results['matmul_gflops']:.1f} GFLOP/s**\n"
         f"- run: {m['date']}, `{results['command']}`\n"
     )
+    if results.get("merged_from"):
+        fresh = [r for sec in ("training", "rollout") for r in results[sec]
+                 if r.get("run") == m["date"]]
+        parts.append(
+            f"- merged: {len(fresh)} rows re-measured in this run; the others are kept from "
+            f"the run(s) of {', '.join(results['merged_from'])} on this machine (compare "
+            "absolute times across runs with care)\n"
+        )
     tt, _ = targets_table(results)
     if results.get("targets"):
         parts.append("### Targets (float32, width 64 × 2; judged on CPU time per step)\n")
@@ -549,6 +580,9 @@ def main(argv=None) -> int:
     ap.add_argument("--runs", type=Path, default=ROOT / "runs",
                     help="folder of reference runs for time to accuracy")
     ap.add_argument("--skip", nargs="*", default=[], choices=["training", "rollout"])
+    ap.add_argument("--merge", type=Path, default=None, metavar="RESULTS_JSON",
+                    help="re-measure only what the other options select and keep every other "
+                         "row of this earlier results.json (each row says which run made it)")
     ap.add_argument("--report-only", type=Path, default=None, metavar="RESULTS_JSON",
                     help="measure nothing: re-render the tables (and --docs) from a results.json")
     args = ap.parse_args(argv)
@@ -588,6 +622,10 @@ def main(argv=None) -> int:
     results["matmul_gflops"] = matmul_rate(results["matmul_size"], 3 if q else 10)
     results["training"] = [] if "training" in args.skip else bench_training(args)
     results["rollout"] = [] if "rollout" in args.skip else bench_rollout(args)
+    for r in results["training"] + results["rollout"]:
+        r["run"] = results["machine"]["date"]
+    if args.merge is not None:
+        merge(results, json.loads(args.merge.read_text()))
     results["time_to_accuracy"] = time_to_accuracy(args.runs)
     dev = jax.devices()[0]
     try:

@@ -33,3 +33,31 @@ def test_benchmark_suite_quick(tmp_path):
     assert all(r["cpu_ms"] > 0 for r in results["training"])
     assert all(r["ok"] for r in results["rollout"])
     assert not (tmp_path / "performance.md").exists()  # --quick writes no docs
+
+
+def test_merge_keeps_the_rows_not_re_measured():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import run as suite
+    finally:
+        sys.path.pop(0)
+    earlier = {
+        "machine": {"date": "then"},
+        "training": [{"model": "a", "jacobi": "none", "batch": 256, "dtype": "float32", "x": 1},
+                     {"model": "b", "jacobi": "none", "batch": 256, "dtype": "float32", "x": 2}],
+        "rollout": [{"model": "m", "trajectories": 64, "steps": 1000, "x": 3}],
+    }
+    now = {
+        "machine": {"date": "now"}, "command": "run.py",
+        "training": [{"model": "b", "jacobi": "none", "batch": 256, "dtype": "float32", "x": 9,
+                      "run": "now"}],
+        "rollout": [{"model": "m", "trajectories": 64, "steps": 1000, "solver": "auto", "x": 4,
+                     "run": "now"}],
+    }
+    suite.merge(now, earlier)
+    assert [(r["model"], r["x"], r["run"]) for r in now["training"]] == [
+        ("a", 1, "then"), ("b", 9, "now")]
+    # The earlier rollout row (Newton, from before solvers were recorded) is kept beside the
+    # new auto row.
+    assert [(r.get("solver"), r["x"]) for r in now["rollout"]] == [(None, 3), ("auto", 4)]
+    assert now["merged_from"] == ["then"] and "then" in now["command"]
