@@ -85,9 +85,16 @@ MODELS = {
     "pendulum-energetic": ("pendulum-energetic", 10, lambda jac: preset("pendulum-energetic"),
                            ("none",)),
     "fully-learned": ("pendulum-energetic", 10,
-                      lambda jac: RunConfig(features="pendulum", jacobi=jac, jacobi_probes=1),
-                      ("none", "exact", "stochastic")),
+                      lambda jac: RunConfig(features="pendulum", jacobi_probes=1,
+                                            **_jacobi_options(jac)),
+                      ("none", "exact", "stochastic", "exact@256", "stochastic@256")),
 }
+
+
+def _jacobi_options(jac: str) -> dict:
+    """``exact`` -> the penalty on every pair; ``exact@256`` -> on 256 pairs of each batch."""
+    estimator, _, samples = jac.partition("@")
+    return {"jacobi": estimator, "jacobi_samples": int(samples) if samples else None}
 MODEL_NOTES = {
     "rigid-body": "n = 3, rigid-body preset: learned E and L (S = 0, M = 0)",
     "pendulum-energetic": "n = 10, pendulum-energetic preset: canonical L, S = s1 + s2, learned "
@@ -106,6 +113,10 @@ TARGETS = [
      ("train", "fully-learned", "exact", 1024, "float32")),
     ("fully learned n=10, batch 1024, stochastic Jacobi", 30.0, "ms/step",
      ("train", "fully-learned", "stochastic", 1024, "float32")),
+    ("fully learned n=10, batch 1024, exact Jacobi on 256 pairs (--jacobi-samples 256)", 30.0,
+     "ms/step", ("train", "fully-learned", "exact@256", 1024, "float32")),
+    ("fully learned n=10, batch 1024, stochastic Jacobi on 256 pairs", 30.0, "ms/step",
+     ("train", "fully-learned", "stochastic@256", 1024, "float32")),
     ("64 trajectories x 1000 CN steps, learned-size model", 0.3, "s",
      ("rollout", "learned-size", 64)),
     ("64 trajectories x 1000 CN steps, pendulum ground truth", 0.3, "s",
@@ -409,6 +420,10 @@ REASONS = {
     "fully learned n=10, batch 1024, stochastic Jacobi": (
         "0.83 MFLOP/sample at only ~22 GFLOP/s: per-sample 10x10 products of the probes and "
         "~1.5 ms/step of threefry normals"),
+    "fully learned n=10, batch 1024, exact Jacobi on 256 pairs (--jacobi-samples 256)": (
+        "the rest of the step (four networks, each differentiated twice) is itself ~17 ms"),
+    "fully learned n=10, batch 1024, stochastic Jacobi on 256 pairs": (
+        "the rest of the step (four networks, each differentiated twice) is itself ~17 ms"),
     "64 trajectories x 1000 CN steps, learned-size model": (
         "with solver=auto ~1 fixed-point iteration per step, i.e. one evaluation of the "
         "learned field (a gradient through the energy network plus the friction network) for "
@@ -570,7 +585,7 @@ def main(argv=None) -> int:
     ap.add_argument("--batches", type=int, nargs="*", default=None)
     ap.add_argument("--float64-batches", type=int, nargs="*", default=None,
                     help="batches timed in float64 (default: the same as --batches)")
-    ap.add_argument("--jacobi", nargs="*", default=None, choices=["none", "exact", "stochastic"],
+    ap.add_argument("--jacobi", nargs="*", default=None, choices=["none", "exact", "stochastic", "exact@256", "stochastic@256"],
                     help="Jacobi modes to time (where the model has a learned L)")
     ap.add_argument("--out", type=Path, default=None,
                     help="folder for results.json (default benchmarks/)")
@@ -590,7 +605,9 @@ def main(argv=None) -> int:
     args.models = args.models or (["rigid-body"] if q else list(MODELS))
     if args.float64_batches is None:
         args.float64_batches = args.batches
-    args.jacobi = args.jacobi or (["exact"] if q else ["none", "exact", "stochastic"])
+    args.jacobi = args.jacobi or (
+        ["exact"] if q else ["none", "exact", "stochastic", "exact@256", "stochastic@256"]
+    )
     args.batches = args.batches or ([32] if q else [256, 1024, 8192])
     args.length = 2 if q else 4
     args.repeats = 2 if q else 5

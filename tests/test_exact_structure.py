@@ -246,6 +246,25 @@ def test_stochastic_jacobi_matches_exact():
     assert se < 0.2 * exact  # the test has power
 
 
+def test_jacobi_penalty_on_a_subset_of_the_batch():
+    n = 4
+    model = mx.GenericModel(ZeroPotential(), ZeroPotential(),
+                            SkewMLPPoisson(n, width=16, key=jr.key(23)), ZeroFriction(n))
+    xs = _states(n, 8, 24)
+    scale = jnp.ones((n,))
+    per_state = [float(JacobiPenalty("exact")(model, Batch(xs[i:i + 1], xs[i:i + 1],
+                                                           jnp.ones((1,)), scale), None, None))
+                 for i in range(8)]
+    batch = Batch(xs, xs, jnp.ones((8,)), scale)
+    # samples=2 of 8: every 4th pair, i.e. pairs 0 and 4.
+    sub = float(JacobiPenalty("exact", samples=2)(model, batch, None, None))
+    np.testing.assert_allclose(sub, 0.5 * (per_state[0] + per_state[4]), rtol=1e-12)
+    full = float(JacobiPenalty("exact", samples=100)(model, batch, None, None))
+    np.testing.assert_allclose(full, np.mean(per_state), rtol=1e-12)
+    with pytest.raises(mx.MetriplexError, match="samples must be >= 1"):
+        JacobiPenalty("exact", samples=0)
+
+
 def _all_models():
     k = jr.split(jr.key(30), 6)
     return {

@@ -43,6 +43,7 @@ class RunConfig:
     degeneracy: str = "soft"
     jacobi: str = "none"
     jacobi_probes: int = 1
+    jacobi_samples: int | None = None
     features: str = "none"
     features_for: str = "energy,entropy"
     scheme: str = "cn"
@@ -136,6 +137,11 @@ def validate(config: RunConfig, n: int) -> None:
         FEATURES[config.features].check(n)
     _feature_blocks(config)
     scheme_from_name(config.scheme)
+    if config.jacobi_samples is not None and config.jacobi_samples < 1:
+        raise MetriplexError(
+            f"--jacobi-samples must be >= 1 (pairs per batch that the Jacobi penalty sees); got "
+            f"{config.jacobi_samples}. Leave it out to use the whole batch."
+        )
     for name in ("width", "depth", "steps", "batch_size", "eval_every"):
         v = getattr(config, name)
         if v < (0 if name == "steps" else 1):
@@ -212,7 +218,9 @@ def build_loss(config: RunConfig) -> Loss:
     if soft and config.friction == "neural" and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * FrictionDegeneracy()
     if config.jacobi != "none" and config.poisson == "neural" and config.w_jacobi > 0:
-        loss = loss + config.w_jacobi * JacobiPenalty(config.jacobi, probes=config.jacobi_probes)
+        loss = loss + config.w_jacobi * JacobiPenalty(
+            config.jacobi, probes=config.jacobi_probes, samples=config.jacobi_samples
+        )
     return loss
 
 
