@@ -86,19 +86,29 @@ def trajectories(ts, pred, obs, names: Sequence[str], *, truth_label="observed",
     return fig
 
 
-def positions(pred, obs, ax=None):
-    """Pendulum: paths of the two masses in the plane, learned against true."""
+def positions(pred, obs, ax=None, *, upto: int | None = None, horizon_label: str = ""):
+    """Pendulum: paths of the two masses in the plane, learned against true.
+
+    With ``upto``, the states ``[:upto]`` (e.g. up to the reported horizon) are drawn in full
+    and the rest faintly, so the figure shows the part that the error bar is about.
+    """
     fig, ax = _axes(ax, (5, 5))
+    cut = len(obs) if upto is None else int(upto)
     for k, (i, c) in enumerate(((0, "C0"), (2, "C1"))):
-        ax.plot(obs[:, i], obs[:, i + 1], color=c, lw=1.8, label=f"mass {k + 1} true")
-        ax.plot(pred[:, i], pred[:, i + 1], color="k", lw=0.9, ls="--",
+        ax.plot(obs[:cut, i], obs[:cut, i + 1], color=c, lw=1.8, label=f"mass {k + 1} true")
+        ax.plot(pred[:cut, i], pred[:cut, i + 1], color="k", lw=0.9, ls="--",
                 label=f"mass {k + 1} learned")
+        if cut < len(obs):
+            ax.plot(obs[cut - 1:, i], obs[cut - 1:, i + 1], color=c, lw=1.0, alpha=0.25)
+            ax.plot(pred[cut - 1:, i], pred[cut - 1:, i + 1], color="k", lw=0.6, ls="--",
+                    alpha=0.25)
     ax.plot([0], [0], "ko", ms=4)
     ax.set_aspect("equal")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     ax.legend(fontsize=8)
-    ax.set_title("positions of the two masses")
+    ax.set_title("positions of the two masses"
+                 + (f"\n({horizon_label}; fainter: later)" if cut < len(obs) else ""))
     return fig
 
 

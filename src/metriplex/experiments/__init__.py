@@ -264,8 +264,13 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
                       folder / "trajectories", t=ts, learned=pred, true=obs,
                       names=np.array(names))
     if exp.system.startswith("pendulum"):
-        plots.save_figure(plots.positions(pred, obs), folder / "positions", learned=pred[:, :4],
-                          true=obs[:, :4])
+        upto = None
+        if exp.horizon is not None:
+            upto = int(np.searchsorted(ts, ts[0] + exp.horizon, side="right"))
+        plots.save_figure(
+            plots.positions(pred, obs, upto=upto, horizon_label=f"t ≤ {exp.horizon:g}"),
+            folder / "positions", learned=pred[:, :4], true=obs[:, :4], t=ts,
+        )
         result["time_to_10pct_error"] = [
             time_to_error(np.asarray(out.ts, dtype=np.float64)[j, : lengths[j]],
                           np.asarray(out.xs, dtype=np.float64)[j, : lengths[j]],
