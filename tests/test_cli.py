@@ -119,6 +119,7 @@ def test_train_refuses_to_overwrite_a_run(oscillator_run):
         (["--jacobi", "maybe"], r"--jacobi must be one of none, exact, stochastic"),
         (["--lr", "-1"], r"--lr must be > 0; got -1"),
         (["--validation", "1.5"], r"--validation must lie in \[0, 1\); got 1.5"),
+        (["--degeneracy-at", "edges"], r"--degeneracy-at must be one of states, midpoints"),
         (["--features-for", "energy,poisson"], r"--features-for lists the networks .* entries "
          r"of L are not invariant"),
     ],

@@ -84,3 +84,41 @@ def test_loss_is_differentiable_and_jittable():
     v, g = f(model, _batch(data), jr.key(0))
     assert np.isfinite(float(v))
     assert all(np.all(np.isfinite(np.asarray(a))) for a in jax.tree_util.tree_leaves(g))
+
+
+def _random_generic(n, exact: bool, seed: int):
+    k = jr.split(jr.key(seed), 4)
+    L = (mx.ProjectedSkewMLPPoisson if exact else mx.SkewMLPPoisson)(n, width=8, key=k[2])
+    M = (mx.ProjectedCholeskyFriction if exact else mx.CholeskyFriction)(n, width=8, key=k[3])
+    return mx.GenericModel(mx.MLPPotential(n, width=8, key=k[0]),
+                           mx.MLPPotential(n, width=8, key=k[1]), L, M)
+
+
+@pytest.mark.parametrize("exact", [False, True], ids=["soft-blocks", "projected-blocks"])
+def test_midpoint_penalties_and_shared_midpoint_terms(exact):
+    n, B = 4, 16
+    model = _random_generic(n, exact, seed=5)
+    x0 = jr.normal(jr.key(6), (B, n))
+    x1 = x0 + 0.1 * jr.normal(jr.key(7), (B, n))
+    batch = Batch(x0, x1, jnp.full((B,), 0.1), jnp.asarray([1.0, 2.0, 0.5, 1.5]))
+    # The midpoint penalty is the defect at (x0 + x1)/2, once per pair.
+    xm = 0.5 * (x0 + x1)
+    t = jax.vmap(model.terms)(xm)
+    want = np.mean(np.sum((np.einsum("bij,bj->bi", t.friction, t.grad_energy)
+                           / np.asarray(batch.scale)) ** 2, axis=-1))
+    _, parts = mx.FrictionDegeneracy(where="midpoints").as_loss()(model, batch)
+    # (Projected blocks are degenerate by construction: both sides are rounding, ~1e-39.)
+    np.testing.assert_allclose(float(parts["degeneracy_M"]), want, rtol=1e-12, atol=1e-30)
+    if not exact:
+        _, parts = mx.FrictionDegeneracy().as_loss()(model, batch)  # at the states: different
+        assert abs(float(parts["degeneracy_M"]) - want) > 1e-6 * want
+    # The discrete-gradient residual gives the same value whether it takes the midpoint terms
+    # from the shared context (and reuses L, M of blocks that ignore the gradient) or not.
+    dg = mx.DiscreteGradient()
+    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
+    own = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, batch.dt, t0, t1)
+    shared = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(
+        model, x0, x1, batch.dt, t0, t1, t)
+    np.testing.assert_allclose(np.asarray(shared), np.asarray(own), rtol=1e-12, atol=1e-14)
+    with pytest.raises(mx.MetriplexError, match="'states' .* or 'midpoints'"):
+        mx.PoissonDegeneracy(where="edges")

@@ -29,6 +29,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--poisson", help="neural | canonical:K | zero | casimir3 (n = 3)")
     g.add_argument("--friction", help="neural | zero")
     g.add_argument("--degeneracy", help="soft (penalties, default) | exact (by construction)")
+    g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
+                   "(both states of each pair, default) | midpoints (one per pair; with "
+                   "--scheme discrete-gradient about halves the step's cost)")
     g.add_argument("--jacobi", help="none | exact | stochastic (Jacobi-identity penalty)")
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "

@@ -41,6 +41,7 @@ class RunConfig:
     poisson: str = "neural"
     friction: str = "neural"
     degeneracy: str = "soft"
+    degeneracy_at: str = "states"
     jacobi: str = "none"
     jacobi_probes: int = 1
     jacobi_samples: int | None = None
@@ -128,6 +129,7 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
     _choice(config.friction, ("neural", "zero"), "--friction")
     _choice(config.degeneracy, ("soft", "exact"), "--degeneracy")
+    _choice(config.degeneracy_at, ("states", "midpoints"), "--degeneracy-at")
     _choice(config.jacobi, ("none", "exact", "stochastic"), "--jacobi")
     if config.features not in ("none", *FEATURES):
         raise MetriplexError(
@@ -214,9 +216,9 @@ def build_loss(config: RunConfig) -> Loss:
     soft = config.degeneracy == "soft"
     learned_L = config.poisson in ("neural", "casimir3")
     if soft and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
-        loss = loss + config.w_degeneracy_L * PoissonDegeneracy()
+        loss = loss + config.w_degeneracy_L * PoissonDegeneracy(config.degeneracy_at)
     if soft and config.friction == "neural" and config.w_degeneracy_M > 0:
-        loss = loss + config.w_degeneracy_M * FrictionDegeneracy()
+        loss = loss + config.w_degeneracy_M * FrictionDegeneracy(config.degeneracy_at)
     if config.jacobi != "none" and config.poisson == "neural" and config.w_jacobi > 0:
         loss = loss + config.w_jacobi * JacobiPenalty(
             config.jacobi, probes=config.jacobi_probes, samples=config.jacobi_samples
@@ -236,13 +238,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     "pendulum-energetic": dict(
         energy="neural", entropy="sum:8,9", poisson="canonical:4", friction="neural",
         features="pendulum", features_for="energy,friction", width=64, depth=2, lr=1e-2,
-        batch_size=256,
+        batch_size=256, degeneracy_at="midpoints",
         scheme="discrete-gradient",
     ),
     "pendulum-temperature": dict(
         energy="neural", entropy="neural", poisson="neural", friction="neural",
         jacobi="stochastic", jacobi_probes=2, features="pendulum", width=64, depth=2, lr=1e-2,
-        batch_size=256, scheme="discrete-gradient",
+        batch_size=256, scheme="discrete-gradient", degeneracy_at="midpoints",
     ),
     # w_degeneracy_M = 1, not 10: early in training any M != 0 violates M grad E = 0 for the
     # still-wrong E, and a strong penalty holds M near 0 while E is learned (gas, 10 000 steps,

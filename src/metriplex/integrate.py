@@ -296,7 +296,8 @@ def project_out(g, v):
     return v - g * (_sum(g * v) / (_sum(g * g) + tau))
 
 
-def discrete_generic_field(model: GenericModel, x0, x1, energy0, energy1, entropy0, entropy1):
+def discrete_generic_field(model: GenericModel, x0, x1, energy0, energy1, entropy0, entropy1,
+                           mid: Terms | None = None):
     r"""The discrete-gradient GENERIC average :math:`\bar L\bar\nabla E + \bar M\bar\nabla S`.
 
     With :math:`\bar\nabla E,\ \bar\nabla S` the discrete gradients of
@@ -310,12 +311,19 @@ def discrete_generic_field(model: GenericModel, x0, x1, energy0, energy1, entrop
     the GENERIC degeneracy holds discretely, whatever the model. The blocks are called as
     ``poisson(x̄, ∇̄S)`` and ``friction(x̄, ∇̄E)``, so exactly degenerate parametrisations see
     the discrete gradients.
+
+    ``mid``: the model's :class:`~metriplex.Terms` at the midpoint, if already computed (the
+    training loss shares them); their gradients are used, and their ``L`` and ``M`` for blocks
+    that do not depend on the gradient argument (``uses_gradient``).
     """
     xm = 0.5 * (x0 + x1)
-    gE = discrete_gradient(jax.grad(model.energy)(xm), energy0, energy1, x0, x1)
-    gS = discrete_gradient(jax.grad(model.entropy)(xm), entropy0, entropy1, x0, x1)
-    L = model.poisson(xm, gS)
-    M = model.friction(xm, gE)
+    gE_mid = jax.grad(model.energy)(xm) if mid is None else mid.grad_energy
+    gS_mid = jax.grad(model.entropy)(xm) if mid is None else mid.grad_entropy
+    gE = discrete_gradient(gE_mid, energy0, energy1, x0, x1)
+    gS = discrete_gradient(gS_mid, entropy0, entropy1, x0, x1)
+    reuse = mid is not None
+    L = mid.poisson if reuse and not model.poisson.uses_gradient else model.poisson(xm, gS)
+    M = mid.friction if reuse and not model.friction.uses_gradient else model.friction(xm, gE)
     reversible = project_out(gS, L @ project_out(gS, gE))
     irreversible = project_out(gE, M @ project_out(gE, gS))
     return reversible + irreversible
@@ -350,9 +358,9 @@ class DiscreteGradient(_Implicit):
             model, x0, x1, energy0, model.energy(x1), entropy0, model.entropy(x1)
         )
 
-    def residual(self, model, x0, x1, dt, terms0, terms1):
+    def residual(self, model, x0, x1, dt, terms0, terms1, mid: Terms | None = None):
         field = discrete_generic_field(
-            model, x0, x1, terms0.energy, terms1.energy, terms0.entropy, terms1.entropy
+            model, x0, x1, terms0.energy, terms1.energy, terms0.entropy, terms1.entropy, mid
         )
         return (x1 - x0) / dt - field
 

@@ -41,12 +41,18 @@ class Batch(NamedTuple):
 class Context(NamedTuple):
     terms0: Terms  # batched over B
     terms1: Terms
+    mid: Terms | None = None  # at the midpoints (x0 + x1)/2, when a term asks for them
 
 
 class AbstractLossTerm(eqx.Module):
     """One named term of the loss; returns the batch mean of a squared norm."""
 
     name: ClassVar[str] = ""
+
+    @property
+    def needs_midpoints(self) -> bool:
+        """Whether this term reads ``ctx.mid`` (then :class:`Loss` evaluates it once)."""
+        return False
 
     @abc.abstractmethod
     def __call__(self, model: GenericModel, batch: Batch, ctx: Context, key) -> jax.Array: ...
@@ -102,11 +108,17 @@ class Loss(eqx.Module):
     def __call__(self, model: GenericModel, batch: Batch, *, key=None):
         # One evaluation over both states of every pair: twice-as-tall matmuls and half as
         # many kernels as two separate vmaps (see docs/performance.md).
+        # Terms nobody reads (e.g. gradients at the states when only the discrete-gradient
+        # residual and midpoint penalties are used) are removed by XLA under jit.
         B = batch.x0.shape[0]
         both = jax.vmap(model.terms)(jnp.concatenate([batch.x0, batch.x1]))
+        mid = None
+        if any(t.needs_midpoints for t in self.terms):
+            mid = jax.vmap(model.terms)(0.5 * (batch.x0 + batch.x1))
         ctx = Context(
             jax.tree_util.tree_map(lambda a: a[:B], both),
             jax.tree_util.tree_map(lambda a: a[B:], both),
+            mid,
         )
         keys = jr.split(jr.key(0) if key is None else key, len(self.terms))
         parts: dict[str, jax.Array] = {}
@@ -133,11 +145,46 @@ class SchemeResidual(AbstractLossTerm):
     scheme: AbstractScheme
     name: ClassVar[str] = "residual"
 
+    @property
+    def needs_midpoints(self) -> bool:
+        # The discrete-gradient residual evaluates the model at the midpoints anyway; taking
+        # those terms from the shared context lets midpoint penalties reuse them.
+        return isinstance(self.scheme, DiscreteGradient)
+
     def __call__(self, model, batch, ctx, key):
-        r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(
-            model, batch.x0, batch.x1, batch.dt, ctx.terms0, ctx.terms1
-        )
+        args = (model, batch.x0, batch.x1, batch.dt, ctx.terms0, ctx.terms1)
+        if self.needs_midpoints:
+            r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(*args, ctx.mid)
+        else:
+            r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(*args)
         return _sq(r, batch.scale)
+
+
+_WHERE = ("states", "midpoints")
+
+
+class _Degeneracy(AbstractLossTerm):
+    where: str = eqx.field(static=True, default="states")
+
+    def __check_init__(self):
+        if self.where not in _WHERE:
+            raise MetriplexError(
+                f"a degeneracy penalty is evaluated at 'states' (both states of each pair) or "
+                f"'midpoints'; got where={self.where!r}."
+            )
+
+    @property
+    def needs_midpoints(self) -> bool:
+        return self.where == "midpoints"
+
+    @staticmethod
+    def _defect(t: Terms) -> jax.Array: ...
+
+    def __call__(self, model, batch, ctx, key):
+        if self.where == "midpoints":
+            return _sq(self._defect(ctx.mid), batch.scale)
+        return 0.5 * (_sq(self._defect(ctx.terms0), batch.scale)
+                      + _sq(self._defect(ctx.terms1), batch.scale))
 
 
 def CrankNicolsonResidual() -> SchemeResidual:
@@ -156,31 +203,37 @@ def DiscreteGradientResidual() -> SchemeResidual:
     return SchemeResidual(DiscreteGradient())
 
 
-class PoissonDegeneracy(AbstractLossTerm):
-    r""":math:`|L\nabla S|^2` at both states of each pair (the seed paper's weight :math:`w_S`)."""
+class PoissonDegeneracy(_Degeneracy):
+    r""":math:`|L\nabla S|^2` at both states of each pair (the seed paper's weight :math:`w_S`).
+
+    ``where="midpoints"`` evaluates it once per pair at :math:`\bar x = (x_0 + x_1)/2`
+    instead, where the discrete-gradient and midpoint schemes evaluate the structure: with the
+    discrete-gradient residual the whole loss then needs the full structure only at the
+    midpoints (energies and entropies at the states), about half the cost of the step
+    (``docs/performance.md``).
+    """
 
     name: ClassVar[str] = "degeneracy_L"
 
-    def __call__(self, model, batch, ctx, key):
-        v0 = jnp.einsum("bij,bj->bi", ctx.terms0.poisson, ctx.terms0.grad_entropy)
-        v1 = jnp.einsum("bij,bj->bi", ctx.terms1.poisson, ctx.terms1.grad_entropy)
-        return 0.5 * (_sq(v0, batch.scale) + _sq(v1, batch.scale))
+    @staticmethod
+    def _defect(t):
+        return jnp.einsum("bij,bj->bi", t.poisson, t.grad_entropy)
 
 
-class FrictionDegeneracy(AbstractLossTerm):
-    r""":math:`|M\nabla E|^2` at both states of each pair (the seed paper's weight :math:`w_E`)."""
+class FrictionDegeneracy(_Degeneracy):
+    r""":math:`|M\nabla E|^2` at both states of each pair (the seed paper's weight :math:`w_E`),
+    or, with ``where="midpoints"``, at their midpoints (see :class:`PoissonDegeneracy`)."""
 
     name: ClassVar[str] = "degeneracy_M"
 
-    def __call__(self, model, batch, ctx, key):
-        v0 = jnp.einsum("bij,bj->bi", ctx.terms0.friction, ctx.terms0.grad_energy)
-        v1 = jnp.einsum("bij,bj->bi", ctx.terms1.friction, ctx.terms1.grad_energy)
-        return 0.5 * (_sq(v0, batch.scale) + _sq(v1, batch.scale))
+    @staticmethod
+    def _defect(t):
+        return jnp.einsum("bij,bj->bi", t.friction, t.grad_energy)
 
 
-def DegeneracyPenalty() -> Loss:
+def DegeneracyPenalty(where: str = "states") -> Loss:
     r"""Both degeneracy penalties, :math:`|L\nabla S|^2 + |M\nabla E|^2`."""
-    return PoissonDegeneracy() + FrictionDegeneracy()
+    return PoissonDegeneracy(where) + FrictionDegeneracy(where)
 
 
 def stochastic_jacobi(model: GenericModel, x, u, v, w):

@@ -70,7 +70,7 @@ EXPERIMENTS: dict[str, Experiment] = {
         ),
         Experiment(
             "pendulum-energetic", "pendulum-energetic", 0.1,
-            full=Size(100, 400, 30_000, 10, 400),
+            full=Size(100, 400, 60_000, 10, 400),
             quick=Size(40, 100, 5000, 4, 100),
             horizon=10.0,
             bars={"rollout_error_to_horizon_mean": 5e-2,

@@ -7,7 +7,7 @@ variants (:math:`M\nabla E = 0` by construction) can use the energy gradient.
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import equinox as eqx
 import jax
@@ -26,6 +26,10 @@ from .scaling import Scaling
 
 class AbstractFriction(eqx.Module):
     """A symmetric positive semi-definite matrix field ``M(x)``."""
+
+    #: Whether the matrix depends on the ``grad_energy`` argument (exactly degenerate
+    #: blocks); if not, a matrix computed with another gradient can be reused.
+    uses_gradient: ClassVar[bool] = True
 
     @abc.abstractmethod
     def __call__(self, x: State, grad_energy: State) -> Matrix: ...
@@ -100,6 +104,8 @@ class CholeskyFriction(AbstractFriction):
     def factor(self, x: State) -> Matrix:
         return self.head(self.hidden(self._inputs(x)))
 
+    uses_gradient: ClassVar[bool] = False
+
     def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
         B = self.factor(x)
         return B @ B.T
@@ -135,6 +141,8 @@ class ZeroFriction(AbstractFriction):
 
     n: int = eqx.field(static=True)
 
+    uses_gradient: ClassVar[bool] = False
+
     def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
         return jnp.zeros((self.n, self.n), x.dtype)
 
@@ -150,6 +158,8 @@ class KnownFriction(AbstractFriction):
     """A friction matrix given by a function ``fn(x) -> (n, n)`` (ground-truth systems)."""
 
     fn: Callable = eqx.field(static=True)
+
+    uses_gradient: ClassVar[bool] = False
 
     def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
         return self.fn(x)

@@ -7,7 +7,7 @@ passed so that exactly degenerate variants (:math:`L\nabla S = 0` by constructio
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import equinox as eqx
 import jax
@@ -24,6 +24,10 @@ from .scaling import Scaling
 
 class AbstractPoisson(eqx.Module):
     """An antisymmetric matrix field ``L(x)``."""
+
+    #: Whether the matrix depends on the ``grad_entropy`` argument (exactly degenerate
+    #: blocks); if not, a matrix computed with another gradient can be reused.
+    uses_gradient: ClassVar[bool] = True
 
     @abc.abstractmethod
     def __call__(self, x: State, grad_entropy: State) -> Matrix: ...
@@ -69,6 +73,8 @@ class SkewMLPPoisson(AbstractPoisson):
         self.hidden = Hidden(n, width, depth, activation, key=hkey)
         rs = None if scaling is None else scaling.row_scale("skew")
         self.head = FoldedHead(width, n, "skew", rs, 1.0, key=okey)
+
+    uses_gradient: ClassVar[bool] = False
 
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         s = self.scaling
@@ -120,6 +126,8 @@ class CanonicalPoisson(AbstractPoisson):
         J[K : 2 * K, :K] = -np.eye(K)
         return J
 
+    uses_gradient: ClassVar[bool] = False
+
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         return jnp.asarray(self.matrix(), x.dtype)
 
@@ -137,6 +145,8 @@ class ZeroPoisson(AbstractPoisson):
 
     n: int = eqx.field(static=True)
 
+    uses_gradient: ClassVar[bool] = False
+
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         return jnp.zeros((self.n, self.n), x.dtype)
 
@@ -152,6 +162,8 @@ class KnownPoisson(AbstractPoisson):
     """A Poisson bivector given by a function ``fn(x) -> (n, n)`` (ground-truth systems)."""
 
     fn: Callable = eqx.field(static=True)
+
+    uses_gradient: ClassVar[bool] = False
 
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         return self.fn(x)
@@ -406,6 +418,8 @@ class CasimirPoisson3(_Casimir3Base):
 
     def _factor(self, z: State):
         return jax.nn.softplus(self.phi(z) + _SOFTPLUS_ONE)
+
+    uses_gradient: ClassVar[bool] = False
 
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         z = self._z(x)
