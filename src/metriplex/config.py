@@ -16,7 +16,14 @@ from ._errors import MetriplexError
 from ._model import GenericModel
 from .data import Trajectories
 from .integrate import scheme_from_name
-from .losses import FrictionDegeneracy, JacobiPenalty, Loss, PoissonDegeneracy, SchemeResidual
+from .losses import (
+    DEGENERACY_POINTS,
+    FrictionDegeneracy,
+    JacobiPenalty,
+    Loss,
+    PoissonDegeneracy,
+    SchemeResidual,
+)
 from .structure import _registry
 from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
@@ -129,7 +136,7 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
     _choice(config.friction, ("neural", "zero"), "--friction")
     _choice(config.degeneracy, ("soft", "exact"), "--degeneracy")
-    _choice(config.degeneracy_at, ("states", "midpoints"), "--degeneracy-at")
+    _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
     _choice(config.jacobi, ("none", "exact", "stochastic"), "--jacobi")
     if config.features not in ("none", *FEATURES):
         raise MetriplexError(

@@ -152,7 +152,7 @@ class _Implicit(AbstractScheme):
     def increment(self, model, x0, x1) -> State:
         return self.average(model, x0, x1, self.start(model, x0))
 
-    def _newton(self, model, x, dt, guess):
+    def _newton(self, model, x, dt, guess, pre):
         def fn(y, args):
             x0, dt, pre = args
             return y - x0 - dt * self.average(model, x0, y, pre)
@@ -160,11 +160,11 @@ class _Implicit(AbstractScheme):
         solver = optx.Newton(
             rtol=_tolerance(self.rtol, x.dtype), atol=_tolerance(self.atol, x.dtype)
         )
-        args = (x, dt, self.start(model, x))
-        sol = optx.root_find(fn, solver, guess, args, max_steps=self.max_steps, throw=False)
+        sol = optx.root_find(fn, solver, guess, (x, dt, pre), max_steps=self.max_steps,
+                             throw=False)
         return _outcome(sol)
 
-    def _fixed_point(self, model, x, dt, guess):
+    def _fixed_point(self, model, x, dt, guess, pre):
         def fn(y, args):
             x0, dt, pre = args
             return x0 + dt * self.average(model, x0, y, pre)
@@ -173,9 +173,8 @@ class _Implicit(AbstractScheme):
             rtol=_fixed_point_tolerance(self.rtol, x.dtype),
             atol=_fixed_point_tolerance(self.atol, x.dtype),
         )
-        args = (x, dt, self.start(model, x))
         steps = self.fixed_point_steps if self.solver == "auto" else self.max_steps
-        sol = optx.fixed_point(fn, solver, guess, args, max_steps=steps, throw=False)
+        sol = optx.fixed_point(fn, solver, guess, (x, dt, pre), max_steps=steps, throw=False)
         return _outcome(sol)
 
     def step(self, model, x, dt, guess):
@@ -183,16 +182,18 @@ class _Implicit(AbstractScheme):
         return y[0], ok[0], its[0]
 
     def step_batch(self, model, x, dt, guess):
-        newton = jax.vmap(lambda x, dt, g: self._newton(model, x, dt, g))
+        # What depends on x0 alone is computed once, for both solvers.
+        pre = jax.vmap(lambda x: self.start(model, x))(x)
+        newton = jax.vmap(lambda *a: self._newton(model, *a))
         if self.solver == "newton":
-            return newton(x, dt, guess)
-        first = jax.vmap(lambda x, dt, g: self._fixed_point(model, x, dt, g))(x, dt, guess)
+            return newton(x, dt, guess, pre)
+        first = jax.vmap(lambda *a: self._fixed_point(model, *a))(x, dt, guess, pre)
         if self.solver == "fixed-point":
             return first
 
         def fallback(first):
             y, ok, its = first
-            y2, ok2, its2 = newton(x, dt, guess)
+            y2, ok2, its2 = newton(x, dt, guess, pre)
             return jnp.where(ok[:, None], y, y2), ok | ok2, its + jnp.where(ok, 0, its2)
 
         # An unbatched predicate: Newton runs only at steps where some trajectory needs it.

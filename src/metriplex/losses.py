@@ -160,14 +160,15 @@ class SchemeResidual(AbstractLossTerm):
         return _sq(r, batch.scale)
 
 
-_WHERE = ("states", "midpoints")
+#: Where a degeneracy penalty can be evaluated (``--degeneracy-at``).
+DEGENERACY_POINTS = ("states", "midpoints")
 
 
 class _Degeneracy(AbstractLossTerm):
     where: str = eqx.field(static=True, default="states")
 
     def __check_init__(self):
-        if self.where not in _WHERE:
+        if self.where not in DEGENERACY_POINTS:
             raise MetriplexError(
                 f"a degeneracy penalty is evaluated at 'states' (both states of each pair) or "
                 f"'midpoints'; got where={self.where!r}."
