@@ -25,10 +25,16 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     d = RunConfig()
     g = p.add_argument_group("structure (what is learned, what is given)")
     g.add_argument("--energy", help="neural (default)")
-    g.add_argument("--entropy", help="neural | sum:I,J,... (S = sum of those components) | zero")
-    g.add_argument("--poisson", help="neural | canonical:K | zero | casimir3 (n = 3)")
-    g.add_argument("--friction", help="neural | zero")
-    g.add_argument("--degeneracy", help="soft (penalties, default) | exact (by construction)")
+    g.add_argument("--entropy", help="neural (default) | sum:I,J,... (S = sum of those "
+                   "components, counted from 0) | zero")
+    g.add_argument("--poisson", help="neural (default) | canonical:K (first K positions, next "
+                   "K momenta) | zero | casimir3 (n = 3, Jacobi exact) | lie-poisson (learned, "
+                   "linear in the state) | file:PATH (a constant L from .npy, .npz or .mat)")
+    g.add_argument("--friction", help="neural (default) | zero | file:PATH (a constant M from "
+                   ".npy, .npz or .mat)")
+    g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
+                   "penalties otherwise) | soft (penalties only) | exact (L and M by "
+                   "construction)")
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")
@@ -51,13 +57,17 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
-    w.add_argument("--steps", type=int, help=f"optimiser steps (default {d.steps})")
+    w.add_argument("--steps", type=int, help=f"the most optimiser steps (default {d.steps}); "
+                   "training usually stops earlier, when the held-out rollouts stop improving")
+    w.add_argument("--max-minutes", type=float, help="stop training after this many minutes "
+                   "(default: no time limit)")
     w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
     w.add_argument("--validation", type=float,
                    help=f"fraction of trajectories held out (default {d.validation})")
     w.add_argument("--eval-every", type=int, help=f"steps between validations (default {d.eval_every})")
-    w.add_argument("--patience", type=int, help="early stop after this many validations "
-                   "without improvement (default: never)")
+    w.add_argument("--patience", type=int, help="validations without improvement before the "
+                   "learning rate is cut (x0.3, from the best model; after 3 cuts training "
+                   "stops; default 8)")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")
@@ -115,6 +125,23 @@ def _params(items):
     return params
 
 
+def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
+    """train's final line: how training ended, and how the held-out rollouts went."""
+    last = history.step[-1] if history.step else 0
+    ended = history.stopped or "completed"
+    if not history.converged and history.best_step == last and last > 0:
+        ended += "; the best model is the last one: not converged, allow more --steps"
+    k = metrics.get("trajectories", 0)
+    failed = metrics.get("rollout_failures", 0)
+    err = metrics.get("rollout_error_mean")
+    where = metrics.get("evaluated_on", "")
+    if failed:
+        rollouts = f"{failed} of {k} rollouts on {where} FAILED (blew up or did not converge)"
+    else:
+        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
+    return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
+
+
 def cmd_train(args) -> None:
     from .io import read
     from .runs import evaluate_run, train_run, write_json
@@ -132,11 +159,7 @@ def cmd_train(args) -> None:
     metrics["evaluated_on"] = "validation trajectories" if valid is not None else "training data"
     metrics["stopped"] = history.stopped
     write_json(out / "metrics.json", metrics)
-    print(
-        f"trained {history.step[-1]} steps in {seconds:.1f} s ({history.stopped}); best "
-        f"validation loss {history.best_valid:.3e} at step {history.best_step}; rollout error "
-        f"on {metrics['evaluated_on']}: {metrics['rollout_error_mean']:.3e}; run folder: {out}"
-    )
+    print(_train_summary(history, metrics, seconds, out))
     if history.stopped.startswith("interrupted"):
         print(
             f"metriplex train: interrupted; the best model so far and a checkpoint are in {out}. "

@@ -10,11 +10,14 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import jax.random as jr
+import numpy as np
 
 from ._errors import MetriplexError
 from ._model import GenericModel
-from .data import Trajectories
+from .data import Trajectories, Units
 from .integrate import scheme_from_name
 from .losses import (
     DEGENERACY_POINTS,
@@ -25,7 +28,9 @@ from .losses import (
     SchemeResidual,
 )
 from .structure import _registry
+from .structure.constant import ConstantFriction, ConstantPoisson
 from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
+from .structure.lie_poisson import LiePoisson
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
 from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
 from .structure.scaling import Scaling
@@ -47,7 +52,7 @@ class RunConfig:
     entropy: str = "neural"
     poisson: str = "neural"
     friction: str = "neural"
-    degeneracy: str = "soft"
+    degeneracy: str = "auto"
     degeneracy_at: str = "states"
     jacobi: str = "none"
     jacobi_probes: int = 1
@@ -62,12 +67,13 @@ class RunConfig:
     width: int = 64
     depth: int = 2
     activation: str = "softplus"
-    lr: float = 1e-3
-    steps: int = 5000
+    lr: float = 1e-2
+    steps: int = 30_000
     batch_size: int = 256
     validation: float = 0.2
     eval_every: int = 100
     patience: int | None = None
+    max_minutes: float | None = None
     seed: int = 0
     float64: bool = False
     checkpoint_every: int = 10
@@ -118,7 +124,9 @@ def validate(config: RunConfig, n: int) -> None:
     head = _choice(config.entropy, ("neural", "sum", "zero"), "--entropy")
     if head == "sum":
         _indices(config.entropy.partition(":")[2], n, "--entropy sum:I,J,...")
-    head = _choice(config.poisson, ("neural", "canonical", "zero", "casimir3"), "--poisson")
+    head = _choice(config.poisson, POISSON_CHOICES, "--poisson")
+    if head == "file":
+        _known_poisson(config, n)
     if head == "canonical":
         try:
             K = int(config.poisson.partition(":")[2])
@@ -134,8 +142,9 @@ def validate(config: RunConfig, n: int) -> None:
             )
     if head == "casimir3" and n != 3:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
-    _choice(config.friction, ("neural", "zero"), "--friction")
-    _choice(config.degeneracy, ("soft", "exact"), "--degeneracy")
+    if _choice(config.friction, FRICTION_CHOICES, "--friction") == "file":
+        _known_friction(config, n)
+    _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
     _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
     _choice(config.jacobi, ("none", "exact", "stochastic"), "--jacobi")
     if config.features not in ("none", *FEATURES):
@@ -151,6 +160,10 @@ def validate(config: RunConfig, n: int) -> None:
             f"--jacobi-samples must be >= 1 (pairs per batch that the Jacobi penalty sees); got "
             f"{config.jacobi_samples}. Leave it out to use the whole batch."
         )
+    if config.patience is not None and config.patience < 1:
+        raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
+    if config.max_minutes is not None and not config.max_minutes > 0:
+        raise MetriplexError(f"--max-minutes must be > 0; got {config.max_minutes}.")
     for name in ("width", "depth", "steps", "batch_size", "eval_every"):
         v = getattr(config, name)
         if v < (0 if name == "steps" else 1):
@@ -166,6 +179,21 @@ def validate(config: RunConfig, n: int) -> None:
 
 FEATURE_BLOCKS = ("energy", "entropy", "friction")
 
+#: ``--degeneracy``: ``auto`` makes a learned L exactly degenerate when S is given (then
+#: L grad S = 0 costs one projection with a known gradient, and the learned entropy can never
+#: decrease in a rollout) and keeps the other conditions as penalties; ``exact`` makes every
+#: learned L and M exactly degenerate; ``soft`` uses penalties only.
+DEGENERACY_MODES = ("auto", "soft", "exact")
+
+
+def exact_blocks(config: RunConfig) -> tuple[bool, bool]:
+    """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
+    if config.degeneracy == "exact":
+        return True, True
+    if config.degeneracy == "soft":
+        return False, False
+    return config.poisson == "neural" and config.entropy.startswith("sum"), False
+
 
 def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     blocks = tuple(b.strip() for b in config.features_for.split(",") if b.strip())
@@ -180,54 +208,206 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     return blocks
 
 
-def build_model(config: RunConfig, data: Trajectories, *, key) -> GenericModel:
-    """The untrained model that ``config`` describes, normalised to ``data``'s scales."""
+#: ``--poisson`` and ``--friction`` choices (``file:PATH`` reads a constant matrix).
+POISSON_CHOICES = ("neural", "canonical", "zero", "casimir3", "lie-poisson", "file")
+FRICTION_CHOICES = ("neural", "zero", "file")
+LEARNED_POISSON = ("neural", "casimir3", "lie-poisson")
+
+
+def read_matrix(path: str, key: str, n: int) -> np.ndarray:
+    """A constant ``n x n`` operator from ``.npy`` (the array), ``.npz`` or ``.mat`` (the
+    variable ``key``, i.e. ``L`` or ``M``, as published GENERIC datasets store them)."""
+    from pathlib import Path
+
+    p = Path(path)
+    option = "--poisson" if key == "L" else "--friction"
+    if not p.is_file():
+        raise MetriplexError(
+            f"{option} file:PATH needs an existing file; {str(p)!r} does not exist. Give the "
+            f"path of a .npy, .npz or .mat file holding the {n}x{n} matrix {key}."
+        )
+    try:
+        if p.suffix == ".npy":
+            a = np.load(p, allow_pickle=False)
+        elif p.suffix == ".npz":
+            with np.load(p, allow_pickle=False) as z:
+                names = list(z.files)
+                if key not in names and len(names) != 1:
+                    raise MetriplexError(
+                        f"{str(p)!r} holds the arrays {names}; name the matrix {key!r} or store "
+                        "it alone."
+                    )
+                a = z[key] if key in names else z[names[0]]
+        elif p.suffix == ".mat":
+            import scipy.io
+
+            scope = scipy.io.loadmat(p)
+            if key not in scope:
+                found = sorted(k for k in scope if not k.startswith("__"))
+                raise MetriplexError(
+                    f"{str(p)!r} has no variable {key!r} (found {found}); store the matrix as "
+                    f"{key}."
+                )
+            a = scope[key]
+        else:
+            raise MetriplexError(
+                f"{option} file:PATH reads .npy, .npz or .mat files; got {p.suffix or 'no'} "
+                "suffix. Save the matrix with numpy.save."
+            )
+    except (OSError, ValueError, NotImplementedError) as err:
+        raise MetriplexError(f"cannot read the matrix {key} from {str(p)!r}: {err}.") from None
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape != (n, n):
+        raise MetriplexError(
+            f"the matrix {key} in {str(p)!r} has shape {a.shape}; the data have {n} variables, "
+            f"so it must be {n}x{n}."
+        )
+    return a
+
+
+def _known_poisson(config: RunConfig, n: int):
+    """The given Poisson bivector, or ``None`` when it is learned."""
+    if config.poisson in LEARNED_POISSON:
+        return None
+    if config.poisson == "zero":
+        return ZeroPoisson(n)
+    if config.poisson.startswith("file:"):
+        return ConstantPoisson(read_matrix(config.poisson.partition(":")[2], "L", n))
+    return CanonicalPoisson(n, int(config.poisson.partition(":")[2]))
+
+
+def _known_friction(config: RunConfig, n: int):
+    """The given friction matrix, or ``None`` when it is learned."""
+    if config.friction == "neural":
+        return None
+    if config.friction == "zero":
+        return ZeroFriction(n)
+    return ConstantFriction(read_matrix(config.friction.partition(":")[2], "M", n))
+
+
+def _known_entropy(config: RunConfig, n: int):
+    """The given entropy, or ``None`` when it is learned."""
+    if config.entropy == "neural":
+        return None
+    if config.entropy == "zero":
+        return ZeroPotential()
+    return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
+
+
+def _rms_nonzero(a: np.ndarray) -> float | None:
+    """Root mean square of the entries that are not zero everywhere (``None`` if all are)."""
+    a = np.asarray(a, dtype=np.float64)
+    live = np.any(a != 0, axis=0)
+    if not np.any(live):
+        return None
+    return float(np.sqrt(np.mean(a[:, live] ** 2)))
+
+
+def _sample(x: np.ndarray, k: int = 256) -> jax.Array:
+    idx = np.linspace(0, len(x) - 1, min(k, len(x))).astype(int)
+    return jnp.asarray(x[idx])
+
+
+def units_for(config: RunConfig, data: Trajectories) -> Units:
+    r"""The data's :class:`~metriplex.data.Units`, with the potentials' scales chosen so that
+    every learned block is of order one in them.
+
+    A learned energy that pairs with a **given** :math:`L` must supply the rates by itself:
+    :math:`\sigma_E = 1/(\tau\,\operatorname{rms}(D^{-1}LD^{-\top}))`. A given entropy
+    sets :math:`\sigma_S = \operatorname{rms}(D\nabla S)` (for :math:`S = s_1 + s_2`, the
+    scale of the :math:`s_i`). Where both partners are learned the scale is 1 (the pair's
+    common factor is not identifiable, so any choice is as good).
+    """
+    units = Units.from_data(data)
+    n = data.n
+    x = _sample(data.x)
+    d = np.asarray(units.scale)
+    known_L = _known_poisson(config, n)
+    known_S = _known_entropy(config, n)
+    energy = 1.0
+    if known_L is not None:
+        zero = jnp.zeros_like(x)
+        mats = np.asarray(jax.vmap(known_L)(x, zero)) / np.outer(d, d)[None]
+        size = _rms_nonzero(mats.reshape(len(x), -1))
+        if size is not None:
+            energy = 1.0 / (units.time * size)
+    entropy = 1.0
+    known_M = _known_friction(config, n)
+    if known_S is not None:
+        grads = np.asarray(jax.vmap(jax.grad(known_S))(x)) * d[None]
+        entropy = _rms_nonzero(grads) or 1.0
+    elif known_M is not None:
+        mats = np.asarray(jax.vmap(known_M)(x, jnp.zeros_like(x))) / np.outer(d, d)[None]
+        size = _rms_nonzero(mats.reshape(len(x), -1))
+        if size is not None:
+            entropy = 1.0 / (units.time * size)
+    return dataclasses.replace(units, energy=float(energy), entropy=float(entropy))
+
+
+def build_model(config: RunConfig, data: Trajectories, *, key,
+                units: Units | None = None) -> GenericModel:
+    """The untrained model that ``config`` describes, in the natural ``units`` of ``data``
+    (default :func:`units_for`): networks see standardised states, and their outputs are scaled
+    so that an untrained network gives rates of the data's order, whatever the units."""
     n = data.n
     validate(config, n)
+    units = units_for(config, data) if units is None else units
     x = data.x
     kE, kS, kL, kM = jr.split(key, 4)
     net = dict(width=config.width, depth=config.depth, activation=config.activation)
     features = FEATURES.get(config.features)
     blocks = _feature_blocks(config)
     feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
-    energy = MLPPotential(n, features=feats["energy"], data=x, key=kE, **net)
-    if config.entropy == "neural":
-        entropy = MLPPotential(n, features=feats["entropy"], data=x, key=kS, **net)
-    elif config.entropy == "zero":
-        entropy = ZeroPotential()
-    else:
-        entropy = SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
-    scaling = Scaling.from_data(x)
-    exact = config.degeneracy == "exact"
+    energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
+                          key=kE, **net)
+    entropy = _known_entropy(config, n)
+    if entropy is None:
+        entropy = MLPPotential(n, features=feats["entropy"], data=x,
+                               output_scale=units.entropy, key=kS, **net)
+    poisson_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.energy))
+    friction_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.entropy))
+    exact_L, exact_M = exact_blocks(config)
+    poisson = _known_poisson(config, n)
     if config.poisson == "neural":
-        spec = {"kind": "projected-mlp" if exact else "mlp", **net, "scaling": scaling.to_json()}
+        spec = {"kind": "projected-mlp" if exact_L else "mlp", **net,
+                "scaling": poisson_scaling.to_json()}
         poisson = _registry.from_spec("poisson", spec, n, key=kL)
     elif config.poisson == "casimir3":
-        spec = {"kind": "casimir3", **net, "scaling": scaling.to_json()}
+        spec = {"kind": "casimir3", **net, "scaling": poisson_scaling.to_json()}
         poisson = _registry.from_spec("poisson", spec, n, key=kL)
-    elif config.poisson == "zero":
-        poisson = ZeroPoisson(n)
-    else:
-        poisson = CanonicalPoisson(n, int(config.poisson.partition(":")[2]))
+    elif config.poisson == "lie-poisson":
+        poisson = LiePoisson(n, scaling=poisson_scaling, key=kL)
     if config.friction == "neural":
-        cls = ProjectedCholeskyFriction if exact else CholeskyFriction
-        friction = cls(n, **net, scaling=scaling, features=feats["friction"], data=x, key=kM)
+        cls = ProjectedCholeskyFriction if exact_M else CholeskyFriction
+        friction = cls(n, **net, scaling=friction_scaling, features=feats["friction"], data=x,
+                       key=kM)
     else:
-        friction = ZeroFriction(n)
+        friction = _known_friction(config, n)
     return GenericModel(energy, entropy, poisson, friction)
 
 
-def build_loss(config: RunConfig) -> Loss:
-    """Scheme residual plus the penalties that the structure needs (none where exact)."""
+def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
+    r"""Scheme residual plus the penalties that the structure needs (none where exact).
+
+    The trainer measures residuals in units of the data's rates (:attr:`Units.rate`). With
+    ``units``, the penalties are measured in the same dimensionless units as the residual
+    (:math:`L\nabla S` scaled by :math:`\sigma_E/\sigma_S`, :math:`M\nabla E` by
+    :math:`\sigma_S/\sigma_E`, the Jacobi tensor by :math:`\sigma_E^2/\tau`), so a weight
+    means the same on any data.
+    """
+    e, s, tau = (1.0, 1.0, 1.0) if units is None else (units.energy, units.entropy, units.time)
     loss = config.w_traj * SchemeResidual(scheme_from_name(config.scheme))
-    soft = config.degeneracy == "soft"
-    learned_L = config.poisson in ("neural", "casimir3")
-    if soft and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
-        loss = loss + config.w_degeneracy_L * PoissonDegeneracy(config.degeneracy_at)
-    if soft and config.friction == "neural" and config.w_degeneracy_M > 0:
-        loss = loss + config.w_degeneracy_M * FrictionDegeneracy(config.degeneracy_at)
-    if config.jacobi != "none" and config.poisson == "neural" and config.w_jacobi > 0:
-        loss = loss + config.w_jacobi * JacobiPenalty(
+    exact_L, exact_M = exact_blocks(config)
+    learned_L = config.poisson in LEARNED_POISSON
+    if not exact_L and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
+        loss = loss + config.w_degeneracy_L * (e / s) ** 2 * PoissonDegeneracy(
+            config.degeneracy_at)
+    if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
+        loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
+            config.degeneracy_at)
+    if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
+            and config.w_jacobi > 0:
+        loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(
             config.jacobi, probes=config.jacobi_probes, samples=config.jacobi_samples
         )
     return loss

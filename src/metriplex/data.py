@@ -25,6 +25,66 @@ def state_scale(x: np.ndarray) -> np.ndarray:
     return np.where(s > 1e-12 * max(float(np.abs(x).max()), 1.0), s, 1.0)
 
 
+def time_scale(pairs: "Pairs", scale: np.ndarray | None = None) -> float:
+    r"""The data's time scale :math:`\tau`: the time over which a typical variable moves by one
+    of its standard deviations.
+
+    With observed rates :math:`v_i = (x_{n+1,i} - x_{n,i})/\Delta t_n` and the state scale
+    :math:`d_i`, :math:`1/\tau` is the geometric mean over the moving variables of
+    :math:`\operatorname{rms}(v_i)/d_i`. It scales with the unit of time (milliseconds instead
+    of seconds give a 1000x larger :math:`\tau`) and ignores offsets of the state, so losses
+    and networks measured in :math:`\tau` do not depend on either. Data that never move get
+    :math:`\tau = 1`.
+    """
+    d = state_scale(pairs.x0) if scale is None else np.asarray(scale, dtype=np.float64)
+    v = (np.asarray(pairs.x1, np.float64) - np.asarray(pairs.x0, np.float64)) / np.asarray(
+        pairs.dt, np.float64)[:, None]
+    rate = np.sqrt(np.mean(v**2, axis=0)) / d
+    moving = rate > 1e-12 * max(float(rate.max(initial=0.0)), 1e-300)
+    if not np.any(moving) or not np.all(np.isfinite(rate)):
+        return 1.0
+    return float(np.exp(-np.mean(np.log(rate[moving]))))
+
+
+@dataclasses.dataclass(frozen=True)
+class Units:
+    r"""The data's natural units, in which every network and every loss term works.
+
+    - ``shift``, ``scale``: per-variable mean :math:`c_i` and standard deviation :math:`d_i`;
+    - ``time``: the time scale :math:`\tau` (:func:`time_scale`);
+    - ``energy``, ``entropy``: scales :math:`\sigma_E, \sigma_S` of the two potentials.
+
+    In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
+    :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
+    :math:`L = D\tilde L D^\top/(\tau\sigma_E)`, :math:`M = D\tilde M D^\top/(\tau\sigma_S)`,
+    so that :math:`\dot{\tilde x} = \tilde L\tilde\nabla\tilde E + \tilde M\tilde\nabla
+    \tilde S` and the networks :math:`\tilde E, \tilde S, \tilde L, \tilde M` of order one give
+    rates of the data's order. The loss terms are measured in the same units (a residual in
+    units of :math:`d_i/\tau`), so their weights need no tuning to the data's units.
+    """
+
+    shift: tuple[float, ...]
+    scale: tuple[float, ...]
+    time: float = 1.0
+    energy: float = 1.0
+    entropy: float = 1.0
+
+    @classmethod
+    def from_data(cls, data: "Trajectories") -> "Units":
+        from .structure._mlp import data_statistics
+
+        shift, scale = data_statistics(data.x)
+        return cls(shift, scale, time_scale(data.pairs(), np.asarray(scale)))
+
+    @property
+    def rate(self) -> np.ndarray:
+        """Per-variable rate scale :math:`d_i/\tau`: the unit of every residual."""
+        return np.asarray(self.scale) / self.time
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
 class Pairs(NamedTuple):
     """Training pairs :math:`(x_n, x_{n+1}, \\Delta t_n)` as arrays of equal length."""
 

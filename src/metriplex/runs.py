@@ -19,7 +19,7 @@ import numpy as np
 from . import plots
 from ._errors import MetriplexError, TrainingDiverged
 from ._model import with_dtype
-from .config import RunConfig, build_loss, build_model, validate
+from .config import RunConfig, build_loss, build_model, units_for, validate
 from .data import Trajectories, state_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
@@ -70,9 +70,10 @@ def train_run(
             )
     train, valid = data.split(config.validation, seed=config.seed)
     model_key, fit_key = jr.split(jr.key(config.seed))
-    model = build_model(config, train, key=model_key)
+    units = units_for(config, train)
+    model = build_model(config, train, key=model_key, units=units)
     model = with_dtype(model, dtype)
-    loss = build_loss(config)
+    loss = build_loss(config, units)
     header = {
         "config": config.to_json(),
         "names": list(data.names),
@@ -80,6 +81,7 @@ def train_run(
         "train_trajectories": [int(i) for i in train.ids],
         "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
         "loss_terms": list(loss.names),
+        "units": units.to_json(),
     }
     write_json(out / "config.json", header)
     start = time.perf_counter()
@@ -94,7 +96,8 @@ def train_run(
             validation=valid,
             eval_every=config.eval_every,
             patience=config.patience,
-            scale=state_scale(train.x),
+            max_seconds=None if config.max_minutes is None else 60.0 * config.max_minutes,
+            scale=units.rate,
             dtype=dtype,
             progress=progress,
             checkpoint=str(out / "checkpoint.ckpt"),

@@ -24,7 +24,7 @@ from tqdm.auto import tqdm
 from . import _checkpoint
 from ._errors import MetriplexError, TrainingDiverged
 from ._model import GenericModel, float_dtype, with_dtype
-from .data import Pairs, Trajectories, state_scale
+from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
 from .losses import Batch, CrankNicolsonResidual, Loss
 
@@ -38,16 +38,109 @@ class History:
     valid: dict[str, list[float]] = dataclasses.field(default_factory=dict)
     time: list[float] = dataclasses.field(default_factory=list)
     learning_rate: list[float] = dataclasses.field(default_factory=list)
+    rollout: list[float] = dataclasses.field(default_factory=list)
+    rollout_failures: list[int] = dataclasses.field(default_factory=list)
     best_step: int = 0
     best_valid: float = math.inf
+    best_rollout: float = math.inf
+    best_rollout_failures: int = -1
     stopped: str = ""
+    converged: bool = False
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     @classmethod
     def from_json(cls, obj: dict[str, Any]) -> "History":
-        return cls(**obj)
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in obj.items() if k in known})
+
+
+@dataclasses.dataclass(frozen=True)
+class Plateau:
+    r"""When :func:`fit` cuts the learning rate and when it stops: the default schedule.
+
+    Every evaluation compares the validation score (the held-out rollout error when validation
+    trajectories are rolled out, else the validation loss) with the best so far. After
+    ``patience`` evaluations without a relative improvement of ``min_delta``, the learning rate
+    is multiplied by ``factor`` and training goes on from the best model; after ``cuts`` such
+    plateaus training stops (*converged*). ``fit``'s ``steps`` stays a cap.
+
+    ```python
+    model, history = fit(model, data, steps=50_000, stopping=Plateau(patience=5), key=key)
+    ```
+    """
+
+    patience: int = 8
+    factor: float = 0.3
+    cuts: int = 3
+    min_delta: float = 1e-3
+
+    def __post_init__(self):
+        if self.patience < 1 or not 0.0 < self.factor < 1.0 or self.cuts < 0:
+            raise MetriplexError(
+                f"Plateau needs patience >= 1, 0 < factor < 1 and cuts >= 0; got "
+                f"patience={self.patience}, factor={self.factor}, cuts={self.cuts}."
+            )
+        if not 0.0 <= self.min_delta < 1.0:
+            raise MetriplexError(
+                f"Plateau.min_delta is a relative improvement in [0, 1); got {self.min_delta}."
+            )
+
+
+@dataclasses.dataclass(frozen=True)
+class RolloutCheck:
+    r"""Judge each evaluation by rolling the model out on held-out trajectories.
+
+    From the first state of up to ``trajectories`` validation trajectories, for at most
+    ``steps`` steps of their own time grid, with the training scheme. The score is the mean
+    over trajectories of the RMS error in units of each variable's standard deviation; a
+    rollout that fails scores :math:`10^3` plus the fraction of steps it missed, so any
+    complete rollout beats any failed one. :func:`fit` keeps the model with the best score.
+    """
+
+    steps: int = 200
+    trajectories: int = 16
+
+    def __post_init__(self):
+        if self.steps < 1 or self.trajectories < 1:
+            raise MetriplexError(
+                f"RolloutCheck needs steps >= 1 and trajectories >= 1; got steps={self.steps}, "
+                f"trajectories={self.trajectories}."
+            )
+
+    def prepare(self, valid: Trajectories, dtype):
+        """The padded windows ``(ts, xs, mask)`` that every check rolls out."""
+        ids = valid.ids[: self.trajectories]
+        ts, xs, lengths = valid.select(ids).padded()
+        T = min(self.steps + 1, ts.shape[1])
+        ts, xs = ts[:, :T], xs[:, :T]
+        mask = np.arange(T)[None, :] < np.minimum(lengths, T)[:, None]
+        return jnp.asarray(ts, dtype), jnp.asarray(xs, dtype), mask
+
+
+FAILED_ROLLOUT_SCORE = 1e3
+
+
+def rollout_score(model, scheme, windows, scale) -> tuple[float, int]:
+    """``(score, failures)`` of :class:`RolloutCheck` for prepared ``windows``."""
+    from .integrate import solve
+
+    ts, xs, mask = windows
+    out = solve(model, xs[:, 0], ts, scheme=scheme)
+    pred = np.asarray(out.xs, np.float64)
+    obs = np.asarray(xs, np.float64)
+    err = np.sum(((pred - obs) / np.asarray(scale)[None, None, :]) ** 2, axis=-1) / obs.shape[-1]
+    failed = np.asarray(out.failed_step) >= 0
+    scores = []
+    for k in range(obs.shape[0]):
+        m = mask[k]
+        if failed[k] or not np.all(np.isfinite(err[k][m])):
+            first = int(out.failed_step[k]) if failed[k] else 0
+            scores.append(FAILED_ROLLOUT_SCORE + 1.0 - first / max(int(m.sum()), 1))
+        else:
+            scores.append(float(np.sqrt(np.mean(err[k][m]))))
+    return float(np.mean(scores)), int(np.sum(failed))
 
 
 def _as_pairs(data) -> tuple[Pairs, Trajectories | None]:
@@ -119,8 +212,37 @@ def _batch_sharding(enabled: bool, batch_size: int):
     return shard
 
 
+def adjustable_optimizer(learning_rate: float, warmup: int = 100) -> optax.GradientTransformation:
+    """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
+    whose learning rate :func:`fit` can change between chunks (:func:`set_learning_rate`)."""
+    return optax.chain(
+        optax.clip_by_global_norm(10.0),
+        optax.scale_by_adam(),
+        optax.scale_by_schedule(
+            optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
+        ),
+        optax.inject_hyperparams(optax.scale)(step_size=-float(learning_rate)),
+    )
+
+
+def _lr_state(opt_state):
+    """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
+    last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
+    hyper = getattr(last, "hyperparams", None)
+    return last if isinstance(hyper, dict) and "step_size" in hyper else None
+
+
+def set_learning_rate(opt_state, learning_rate: float):
+    """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
+    last = _lr_state(opt_state)
+    old = last.hyperparams["step_size"]
+    hyper = {**last.hyperparams, "step_size": jnp.asarray(-learning_rate, old.dtype)}
+    return (*opt_state[:-1], last._replace(hyperparams=hyper))
+
+
 def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
-    """Adam with a short linear warm-up and cosine decay to 1% of the peak rate."""
+    """Adam with a short linear warm-up and cosine decay to 1% of the peak rate (the schedule
+    of ``fit(..., stopping=None)``: a fixed number of steps)."""
     schedule = optax.warmup_cosine_decay_schedule(
         init_value=learning_rate * 0.1,
         peak_value=learning_rate,
@@ -171,18 +293,32 @@ def train_chunk(loss: Loss, optimizer, static, batch_size: int, shard=None):
     return chunk
 
 
+def _scheme_of(loss: Loss):
+    """The scheme of the loss's residual term (Crank–Nicolson if it has none)."""
+    from .integrate import CrankNicolson
+    from .losses import SchemeResidual
+
+    for term in loss.terms:
+        if isinstance(term, SchemeResidual):
+            return term.scheme
+    return CrankNicolson()
+
+
 def fit(
     model: GenericModel,
     data,
     *,
     loss: Loss | None = None,
     optimizer: optax.GradientTransformation | None = None,
-    learning_rate: float = 1e-3,
-    steps: int = 5000,
+    learning_rate: float = 1e-2,
+    steps: int = 30_000,
     batch_size: int = 256,
     validation: float | Trajectories | None = 0.2,
     eval_every: int = 100,
+    stopping: Plateau | None = Plateau(),
+    rollout_check: RolloutCheck | None = RolloutCheck(),
     patience: int | None = None,
+    max_seconds: float | None = None,
     scale=None,
     dtype=None,
     progress: bool = True,
@@ -195,6 +331,14 @@ def fit(
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
 
+    By default training runs until the validation score stops improving: Adam with a short
+    warm-up; after ``stopping.patience`` evaluations without improvement the learning rate is
+    cut (``stopping.factor``) and training resumes from the best model; after
+    ``stopping.cuts`` plateaus it stops (``history.converged``). ``steps`` (and
+    ``max_seconds``) cap the run. The validation score is the error of short rollouts of the
+    held-out trajectories (``rollout_check``), so the model kept is the one that rolls out
+    best, not only the one with the smallest pair residual.
+
     Parameters
     ----------
     data:
@@ -202,15 +346,31 @@ def fit(
         or ready :class:`~metriplex.data.Pairs`.
     loss:
         Default: :func:`~metriplex.CrankNicolsonResidual`.
+    learning_rate:
+        Peak Adam learning rate (default 1e-2; every loss is measured in the data's own units,
+        so one rate serves data of any scale).
+    steps:
+        The most optimiser steps (default 30 000).
     validation:
         Fraction of trajectories held out (default 0.2; split **by trajectory**), explicit
         validation ``Trajectories``, or ``None``/``0`` for none. The returned model is the one
-        with the lowest validation loss (or training loss without validation).
+        with the best validation score (or training loss without validation).
+    stopping:
+        A :class:`Plateau` (default), or ``None`` for exactly ``steps`` steps of a cosine
+        schedule (``default_optimizer``), optionally ended by ``patience``.
+    rollout_check:
+        A :class:`RolloutCheck` (default) to score evaluations by held-out rollouts, or
+        ``None`` to score them by the validation loss only.
     patience:
-        Stop after this many evaluations without improvement (``None``: never stop early).
+        Evaluations without improvement before a plateau (overrides ``stopping.patience``);
+        with ``stopping=None``, before training stops.
+    max_seconds:
+        Stop after this much training time (a budget, like ``steps``).
     scale:
-        Per-component data scale used to weigh loss terms (default: standard deviation of the
-        training states, 1 for constant columns).
+        Per-component rate scale in which residuals are measured (default
+        :math:`d_i/\tau`: the standard deviation of the training states, 1 for constant
+        columns, over the data's time scale :func:`~metriplex.data.time_scale`; so the loss
+        does not depend on the units of time or of the state).
     dtype:
         ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the model's.
     checkpoint:
@@ -226,7 +386,7 @@ def fit(
         first (see docs/performance.md).
 
     ```python
-    model, history = fit(model, data, steps=2000, key=jr.key(0))
+    model, history = fit(model, data, key=jr.key(0))
     ```
     """
     if steps < 0 or batch_size < 1 or eval_every < 1:
@@ -234,9 +394,16 @@ def fit(
             f"need steps >= 0, batch_size >= 1 and eval_every >= 1; got steps={steps}, "
             f"batch_size={batch_size}, eval_every={eval_every}."
         )
+    if not learning_rate > 0:
+        raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
+    if patience is not None and patience < 1:
+        raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
+    if stopping is not None and patience is not None:
+        stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
     n = getattr(model, "n", None) or model_size(model)
     valid_pairs = None
+    valid_data = None
     if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
         train_data, valid_data = data.split(float(validation), seed=seed_split)
         train_pairs = train_data.pairs()
@@ -244,6 +411,7 @@ def fit(
     else:
         train_pairs, _ = _as_pairs(data)
         if isinstance(validation, Trajectories):
+            valid_data = validation
             valid_pairs = validation.pairs()
     _check_pairs(train_pairs, n, "training")
     if valid_pairs is not None:
@@ -251,13 +419,17 @@ def fit(
     if dtype is None:
         dtype = float_dtype(model, default=jnp.float32)
     if scale is None:
-        scale = state_scale(train_pairs.x0)
+        d = state_scale(train_pairs.x0)
+        scale = d / time_scale(train_pairs, d)
     scale = np.asarray(scale, dtype=np.float64)
     model = with_dtype(model, dtype)
 
-    optimizer = default_optimizer(learning_rate, steps) if optimizer is None else optimizer
+    if optimizer is None:
+        optimizer = (default_optimizer(learning_rate, steps) if stopping is None
+                     else adjustable_optimizer(learning_rate))
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
+    adjustable = stopping is not None and _lr_state(opt_state) is not None
     n_train = len(train_pairs)
     bsz = min(batch_size, n_train)
     shard = _batch_sharding(data_parallel, bsz)
@@ -283,21 +455,31 @@ def fit(
         total, parts = evaluate(params, _batch(pairs, idx, scale, dtype), key)
         return float(total), {k: float(v) for k, v in parts.items()}
 
+    windows = None
+    if rollout_check is not None and valid_data is not None:
+        windows = rollout_check.prepare(valid_data, dtype)
+        scheme = _scheme_of(loss)
+        state_units = state_scale(np.concatenate([train_pairs.x0, valid_data.x]))
+
     history = History()
-    best_params = params
-    best_value = math.inf
+    best_params = restart_params = params
+    best_value = plateau_best = math.inf
     since_best = 0
+    cuts = 0
+    lr = float(learning_rate)
     done = 0
     key, eval_key = jr.split(key)
     train_value, train_parts = math.nan, {}
     if resume:
         if checkpoint is None:
             raise MetriplexError("resume=True needs the `checkpoint` path to resume from.")
-        state = _checkpoint.load(checkpoint, (params, opt_state, best_params, jr.key_data(key)))
-        (params, opt_state, best_params, key_data), meta = state
+        state = _checkpoint.load(
+            checkpoint, (params, opt_state, best_params, restart_params, jr.key_data(key)))
+        (params, opt_state, best_params, restart_params, key_data), meta = state
         key = jr.wrap_key_data(key_data)
         history = History.from_json(meta["history"])
         done, best_value, since_best = meta["done"], meta["best_value"], meta["since_best"]
+        cuts, lr, plateau_best = meta["cuts"], meta["lr"], meta["plateau_best"]
         train_value, train_parts = meta["train_value"], meta["train_parts"]
         if history.stopped.startswith("interrupted"):
             history.stopped = ""
@@ -312,9 +494,11 @@ def fit(
             return
         meta = dict(
             done=done, best_value=best_value, since_best=since_best, history=history.to_json(),
-            train_value=train_value, train_parts=train_parts,
+            train_value=train_value, train_parts=train_parts, cuts=cuts, lr=lr,
+            plateau_best=plateau_best,
         )
-        _checkpoint.save(checkpoint, (params, opt_state, best_params, jr.key_data(key)), meta)
+        _checkpoint.save(
+            checkpoint, (params, opt_state, best_params, restart_params, jr.key_data(key)), meta)
 
     start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
     evaluations = 0
@@ -336,7 +520,7 @@ def fit(
             if skip_evaluation:
                 # Resumed: the restored history already holds the evaluation at `done`.
                 skip_evaluation = False
-                if done >= steps or history.stopped.startswith("early stop"):
+                if done >= steps or history.stopped.startswith(("early stop", "converged")):
                     break
                 run_next_chunk()
                 continue
@@ -350,6 +534,7 @@ def fit(
                 va_total, va_parts = tr_total, {}
             history.step.append(done)
             history.time.append(time.perf_counter() - start)
+            history.learning_rate.append(lr)
             for name, v in tr_parts.items():
                 history.train.setdefault(name, []).append(v)
             history.train.setdefault("total", []).append(tr_total)
@@ -367,21 +552,56 @@ def fit(
                     model=eqx.combine(best_params, static),
                     history=history,
                 )
-            if va_total < best_value:
-                best_value, best_params, since_best = va_total, params, 0
-                history.best_step, history.best_valid = done, va_total
+            # The plateau schedule follows the (smooth) validation loss; the model kept is the
+            # one with the best score: held-out rollouts when checked, else that loss.
+            if va_total < plateau_best * (1.0 - (stopping.min_delta if stopping else 0.0)):
+                since_best = 0
             else:
                 since_best += 1
-            bar.set_postfix(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
+            if va_total < plateau_best:
+                plateau_best, restart_params = va_total, params
+            score = va_total
+            failures = -1
+            if windows is not None:
+                score, failures = rollout_score(
+                    eqx.combine(params, static), scheme, windows, state_units)
+                history.rollout.append(score)
+                history.rollout_failures.append(failures)
+            if score < best_value:
+                best_value, best_params = score, params
+                history.best_step, history.best_valid = done, va_total
+                if windows is not None:
+                    history.best_rollout, history.best_rollout_failures = score, failures
+            postfix = dict(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
+            if windows is not None:
+                postfix["rollout"] = f"{score:.3g}" + (f" ({failures} failed)" if failures else "")
+            bar.set_postfix(**postfix)
             evaluations += 1
             if evaluations % max(checkpoint_every, 1) == 0:
                 save_checkpoint()
             if done >= steps:
-                history.stopped = history.stopped or "completed"
+                history.stopped = history.stopped or f"step budget reached ({steps} steps)"
                 break
-            if patience is not None and since_best > patience:
-                history.stopped = f"early stop at step {done} (no improvement in {patience} evaluations)"
+            if max_seconds is not None and history.time[-1] >= max_seconds:
+                history.stopped = f"time budget reached ({max_seconds:g} s) at step {done}"
                 break
+            if stopping is None:
+                if patience is not None and since_best > patience:
+                    history.stopped = (f"early stop at step {done} (no improvement in "
+                                       f"{patience} evaluations)")
+                    history.converged = True
+                    break
+            elif since_best >= stopping.patience:
+                if cuts >= stopping.cuts or not adjustable:
+                    history.stopped = (f"converged at step {done} (no improvement in "
+                                       f"{stopping.patience} evaluations after {cuts} "
+                                       "learning-rate cuts)")
+                    history.converged = True
+                    break
+                cuts += 1
+                lr *= stopping.factor
+                params, since_best = restart_params, 0
+                opt_state = set_learning_rate(opt_state, lr)
             run_next_chunk()
     except KeyboardInterrupt:
         history.stopped = f"interrupted at step {done}"

@@ -355,8 +355,8 @@ class _Casimir3Base(AbstractPoisson):
         s = self.scaling
         if s is None:
             return L
-        # d_i d_j as one symmetric factor keeps L exactly antisymmetric.
-        return L * jnp.asarray(np.outer(s.scale, s.scale), L.dtype)
+        # f d_i d_j as one symmetric factor keeps L exactly antisymmetric.
+        return L * jnp.asarray(s.congruence(), L.dtype)
 
     def _spec_common(self) -> dict[str, Any]:
         return {

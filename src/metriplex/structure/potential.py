@@ -88,7 +88,9 @@ class MLPPotential(AbstractPotential):
 
     Inputs (after the optional ``features``) are standardised with statistics of ``data`` when
     given, so that states of very different magnitudes (e.g. temperatures ~300 and entropies
-    ~1e-2) are learned equally well.
+    ~1e-2) are learned equally well. ``output_scale`` :math:`\sigma` multiplies the network:
+    :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
+    (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.data.Units`).
 
     ```python
     E = MLPPotential(10, width=64, depth=2, key=jr.key(0))
@@ -102,6 +104,7 @@ class MLPPotential(AbstractPotential):
     features: FeatureMap | None
     shift: tuple[float, ...] | None = eqx.field(static=True)
     scale: tuple[float, ...] | None = eqx.field(static=True)
+    output_scale: float = eqx.field(static=True)
 
     def __init__(
         self,
@@ -114,10 +117,16 @@ class MLPPotential(AbstractPotential):
         data=None,
         shift=None,
         scale=None,
+        output_scale: float = 1.0,
         key,
     ):
         import jax.random as jr
 
+        if not (np.isfinite(output_scale) and output_scale > 0):
+            raise MetriplexError(
+                f"MLPPotential output_scale must be finite and > 0; got {output_scale}."
+            )
+        self.output_scale = float(output_scale)
         self.n = n
         self.features = features
         if features is not None:
@@ -138,7 +147,8 @@ class MLPPotential(AbstractPotential):
 
     def __call__(self, x: State) -> Scalar:
         z = x if self.features is None else self.features(x)
-        return self.out(self.hidden(standardise(z, self.shift, self.scale)))
+        y = self.out(self.hidden(standardise(z, self.shift, self.scale)))
+        return y if self.output_scale == 1.0 else self.output_scale * y
 
     def spec(self):
         return {
@@ -149,6 +159,7 @@ class MLPPotential(AbstractPotential):
             "features": None if self.features is None else self.features.to_json(),
             "shift": self.shift,
             "scale": self.scale,
+            "output_scale": self.output_scale,
         }
 
     @classmethod
@@ -162,6 +173,7 @@ class MLPPotential(AbstractPotential):
             features=None if feats is None else FeatureMap(**feats),
             shift=spec.get("shift"),
             scale=spec.get("scale"),
+            output_scale=spec.get("output_scale", 1.0),
             key=key,
         )
 

@@ -7,7 +7,11 @@ bivectors transform as contravariant 2-tensors,
 .. math:: L(x) = D\,\tilde L(\tilde x)\,D^\top, \qquad M(x) = D\,\tilde M(\tilde x)\,D^\top,
 
 so that :math:`L\nabla E = D\,\tilde L\,\tilde\nabla\tilde E` and the dynamics are the same in
-both coordinates. Antisymmetry, symmetry, positive semi-definiteness, degeneracy and the Jacobi
+both coordinates. A positive ``factor`` :math:`f` carries the units of time and of the
+potential that the bivector pairs with: :math:`L = f\,D\tilde L D^\top`. With
+:math:`f = 1/(\tau\sigma)` (:math:`\tau` the data's time scale, :math:`\sigma` the scale of
+:math:`E` for :math:`L`, of :math:`S` for :math:`M`) a network of order one gives rates of the
+data's order, whatever the units of time (see :class:`metriplex.data.Units`). Antisymmetry, symmetry, positive semi-definiteness, degeneracy and the Jacobi
 identity are all invariant under this congruence. This module is the one place where the rule
 lives; the networks fold it into their last layer.
 """
@@ -28,6 +32,7 @@ class Scaling:
 
     shift: tuple[float, ...]
     scale: tuple[float, ...]
+    factor: float = 1.0
 
     def __post_init__(self):
         if len(self.shift) != len(self.scale):
@@ -40,28 +45,40 @@ class Scaling:
                 f"Scaling.scale must be finite and > 0; got {self.scale}. Constant columns get "
                 "scale 1 from `Scaling.from_data`."
             )
+        if not (np.isfinite(self.factor) and self.factor > 0):
+            raise MetriplexError(
+                f"Scaling.factor must be finite and > 0; got {self.factor}. It is 1/(time scale "
+                "x potential scale) of the data; leave it at 1 for no time scaling."
+            )
 
     @classmethod
     def identity(cls, n: int) -> "Scaling":
         return cls((0.0,) * n, (1.0,) * n)
 
     @classmethod
-    def from_data(cls, x) -> "Scaling":
+    def from_data(cls, x, factor: float = 1.0) -> "Scaling":
         """Per-component mean and standard deviation of states ``x`` (shape ``(N, n)``)."""
         shift, scale = data_statistics(np.asarray(x))
-        return cls(shift, scale)
+        return cls(shift, scale, float(factor))
+
+    def congruence(self) -> np.ndarray:
+        r"""The ``(n, n)`` factors :math:`f\,d_i d_j` of :math:`L = f D\tilde L D^\top`."""
+        d = np.asarray(self.scale)
+        return self.factor * np.outer(d, d)
 
     def row_scale(self, triangle: str) -> tuple[float, ...]:
-        """Row factors that turn a flat ``n*n`` matrix ``A`` into ``D A D^T`` (skew) or
-        ``D B`` (lower; then ``M = (D B)(D B)^T = D B B^T D^T``)."""
+        """Row factors that turn a flat ``n*n`` matrix ``A`` into ``f D A D^T`` (skew) or
+        ``sqrt(f) D B`` (lower; then ``M = f D B B^T D^T``)."""
         d = np.asarray(self.scale)
         if triangle == "skew":
-            return tuple(float(v) for v in np.outer(d, d).ravel())
-        return tuple(float(v) for v in np.repeat(d, len(d)))
+            return tuple(float(v) for v in self.congruence().ravel())
+        return tuple(float(v) for v in np.sqrt(self.factor) * np.repeat(d, len(d)))
 
     def to_json(self) -> dict:
-        return {"shift": list(self.shift), "scale": list(self.scale)}
+        return {"shift": list(self.shift), "scale": list(self.scale), "factor": self.factor}
 
     @classmethod
     def from_json(cls, obj) -> "Scaling | None":
-        return None if obj is None else cls(tuple(obj["shift"]), tuple(obj["scale"]))
+        if obj is None:
+            return None
+        return cls(tuple(obj["shift"]), tuple(obj["scale"]), float(obj.get("factor", 1.0)))

@@ -1,0 +1,66 @@
+"""Training does not depend on the units: time in ms instead of s, or a variable offset by 1e3."""
+
+import dataclasses
+
+import jax.random as jr
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex.config import RunConfig, build_loss, build_model, units_for
+from metriplex.data import time_scale
+from helpers import damped_oscillator, make_data, oscillator_x0
+
+
+def _data():
+    return make_data(damped_oscillator(), oscillator_x0(8), 0.1, 30, names=("q", "p", "s"))
+
+
+def _transformed(data, time_factor=1.0, offset=(0.0, 0.0, 0.0)):
+    return mx.Trajectories(data.trajectory, data.t * time_factor,
+                           data.x + np.asarray(offset)[None, :], data.names)
+
+
+def test_time_scale_follows_the_unit_of_time_and_ignores_offsets():
+    data = _data()
+    tau = time_scale(data.pairs())
+    assert tau > 0
+    assert time_scale(_transformed(data, 1e3).pairs()) == pytest.approx(1e3 * tau, rel=1e-12)
+    assert time_scale(_transformed(data, 1.0, (1e3, -5.0, 1e4)).pairs()) == pytest.approx(
+        tau, rel=1e-6)
+
+
+def test_units_put_the_learned_energy_on_the_scale_of_the_given_bracket():
+    data = _data()
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural")
+    u = units_for(config, data)
+    # Canonical L: the learned E must give dq/dt ~ d_q / tau from dE/dp, so sigma_E ~ d_q d_p / tau.
+    d = np.asarray(u.scale)
+    assert u.energy == pytest.approx(d[0] * d[1] / u.time, rel=1e-12)
+    assert u.entropy == pytest.approx(d[2], rel=1e-12)  # S = s: grad S = 1, in units of s
+    slow = units_for(config, _transformed(data, 1e3))
+    assert slow.time == pytest.approx(1e3 * u.time, rel=1e-12)
+    assert slow.energy == pytest.approx(u.energy / 1e3, rel=1e-12)
+
+
+@pytest.mark.parametrize("time_factor, offset", [(1e3, (0.0, 0.0, 0.0)), (1.0, (1e3, 0.0, -1e3))])
+def test_training_is_the_same_in_other_units(time_factor, offset):
+    data = _data()
+    other = _transformed(data, time_factor, offset)
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural", width=16,
+                       float64=True)
+    histories, fields = [], []
+    for d, factor in ((data, 1.0), (other, time_factor)):
+        units = units_for(config, d)
+        model = build_model(config, d, key=jr.key(0), units=units)
+        model, history = mx.fit(model, d, loss=build_loss(config, units), steps=300,
+                                eval_every=100, scale=units.rate, progress=False,
+                                rollout_check=None, key=jr.key(1))
+        histories.append(history)
+        # The vector field in the data's own units, mapped back to the first data's units.
+        f = np.stack([np.asarray(model.vector_field(x)) for x in d.x[:20]])
+        fields.append(f * factor)
+    a, b = histories
+    assert a.valid["total"][-1] < a.valid["total"][0] / 5  # it did learn something
+    np.testing.assert_allclose(a.valid["total"], b.valid["total"], rtol=1e-5)
+    np.testing.assert_allclose(fields[0], fields[1], rtol=1e-4, atol=1e-6 * np.abs(fields[0]).max())
