@@ -15,6 +15,7 @@ from ._model import GenericModel as GenericModel
 from ._model import Terms as Terms
 from .data import Pairs as Pairs
 from .data import Trajectories as Trajectories
+from .data import Units as Units
 from .diagnostics import evaluate as evaluate
 from .integrate import RK4 as RK4
 from .integrate import AbstractScheme as AbstractScheme
@@ -42,6 +43,9 @@ from .structure import CanonicalPoisson as CanonicalPoisson
 from .structure import CasimirPoisson3 as CasimirPoisson3
 from .structure import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .structure import CholeskyFriction as CholeskyFriction
+from .structure import ConstantFriction as ConstantFriction
+from .structure import ConstantPoisson as ConstantPoisson
+from .structure import LiePoisson as LiePoisson
 from .structure import FeatureMap as FeatureMap
 from .structure import Known as Known
 from .structure import KnownFriction as KnownFriction
@@ -56,4 +60,6 @@ from .structure import ZeroFriction as ZeroFriction
 from .structure import ZeroPoisson as ZeroPoisson
 from .structure import ZeroPotential as ZeroPotential
 from .train import History as History
+from .train import Plateau as Plateau
+from .train import RolloutCheck as RolloutCheck
 from .train import fit as fit

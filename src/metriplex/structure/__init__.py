@@ -1,5 +1,7 @@
 """GENERIC building blocks: potentials (E, S), Poisson bivectors (L), friction matrices (M)."""
 
+from .constant import ConstantFriction as ConstantFriction
+from .constant import ConstantPoisson as ConstantPoisson
 from .friction import AbstractFriction as AbstractFriction
 from .friction import CholeskyFriction as CholeskyFriction
 from .friction import KnownFriction as KnownFriction
@@ -9,6 +11,7 @@ from .poisson import AbstractPoisson as AbstractPoisson
 from .poisson import CanonicalPoisson as CanonicalPoisson
 from .poisson import CasimirPoisson3 as CasimirPoisson3
 from .poisson import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
+from .lie_poisson import LiePoisson as LiePoisson
 from .poisson import KnownPoisson as KnownPoisson
 from .poisson import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .poisson import SkewMLPPoisson as SkewMLPPoisson

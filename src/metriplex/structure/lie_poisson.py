@@ -1,0 +1,69 @@
+r"""A learned Lie–Poisson bivector: :math:`L(x)` linear in the state.
+
+.. math:: L_{ij}(x) = \sum_k c_{ij}^{\,k}\,x_k,\qquad c_{ij}^{\,k} = -c_{ji}^{\,k},
+
+the bracket on the dual of a Lie algebra with structure constants :math:`c` (the rigid body's
+:math:`L(m) = -\varepsilon m` is one). It is the prior for rigid-body-like systems: far fewer
+parameters than a network, and exact extrapolation wherever the truth is Lie–Poisson. The
+Jacobi identity holds iff :math:`c` satisfies the Lie algebra's Jacobi identity; train with the
+Jacobi penalty (``--jacobi exact``) to get it.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+
+from .._errors import MetriplexError
+from .._types import Matrix, State
+from ._registry import register
+from .poisson import AbstractPoisson
+from .scaling import Scaling
+
+
+@register("poisson", "lie-poisson")
+class LiePoisson(AbstractPoisson):
+    r"""Learned :math:`L_{ij}(x) = \sum_k c_{ij}^{\,k}x_k` (see the module docstring).
+
+    With a :class:`~metriplex.structure.scaling.Scaling` the weights are dimensionless:
+    :math:`L = f\,D\,\big(\sum_k \tilde c^{\,k} x_k/d_k\big)\,D^\top` (no shift: :math:`L` stays
+    linear in :math:`x`, as a Lie–Poisson bracket must).
+
+    ```python
+    L = LiePoisson(3, key=jr.key(0))
+    L(jnp.ones(3))  # antisymmetric, linear in x
+    ```
+    """
+
+    weight: jax.Array  # (n, n, n): weight[k] is the (not yet antisymmetric) matrix for x_k
+    n: int = eqx.field(static=True)
+    scaling: Scaling | None = eqx.field(static=True)
+
+    def __init__(self, n: int, *, scaling: Scaling | None = None, key):
+        if n < 2:
+            raise MetriplexError(f"a Lie-Poisson bivector needs n >= 2 variables; got {n}.")
+        self.n = n
+        self.scaling = scaling
+        self.weight = jr.normal(key, (n, n, n)) / np.sqrt(n)
+
+    uses_gradient: ClassVar[bool] = False
+
+    def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
+        s = self.scaling
+        z = x if s is None else x / jnp.asarray(s.scale, x.dtype)
+        A = jnp.tensordot(z, self.weight.astype(x.dtype), axes=1)
+        L = A - A.T
+        return L if s is None else L * jnp.asarray(s.congruence(), x.dtype)
+
+    def spec(self):
+        return {"kind": "lie-poisson",
+                "scaling": None if self.scaling is None else self.scaling.to_json()}
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls(n, scaling=Scaling.from_json(spec.get("scaling")), key=key)
