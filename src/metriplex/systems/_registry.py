@@ -9,11 +9,14 @@ from ._base import System
 from .gas import GasContainers
 from .pendulum import PendulumEnergetic, PendulumTemperature
 from .rigid_body import RigidBody
+from .zoo import ZOO
 
-#: Every built-in system with its default parameters, by name.
+#: Every built-in system with its default parameters, by name: the reference experiments'
+#: systems, then the zoo (``metriplex.systems.zoo``).
 SYSTEMS: dict[str, System] = {
     s.name: s for s in (RigidBody(), PendulumEnergetic(), PendulumTemperature(), GasContainers())
 }
+SYSTEMS.update({name: case.system for name, case in ZOO.items()})
 
 
 def get_system(name: str, **params: Any) -> System:

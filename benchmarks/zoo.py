@@ -1,0 +1,185 @@
+"""The zoo benchmark: default settings on GENERIC systems that no default was tuned on.
+
+For every zoo case (``metriplex.systems.zoo``): ground-truth training data (seed 0), training
+with the **default** settings plus only the structure options that the case's user knows, then
+rollouts from unseen initial conditions (seed 1000) over the case's horizon. Prints one table:
+
+    system, n, flags given, rel. L2 (plain and standardised), failed rollouts, training time
+
+- plain rel. L2: ``|pred - obs| / |obs|`` per trajectory (``metriplex evaluate``'s
+  ``rollout_error_mean``), mean over test trajectories; a failed rollout counts as inf;
+- standardised: the same after dividing every variable by its standard deviation over the test
+  data and removing its mean (offsets such as a temperature of 300 K or a spin of 1e4 cannot
+  hide an error), ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``.
+
+```bash
+python benchmarks/zoo.py                         # every case, defaults
+python benchmarks/zoo.py --cases oscillator-bath,heat-exchange --set lr=1e-2
+python benchmarks/zoo.py --out zoo.json          # also write the rows as JSON
+```
+
+Cases marked ``held_out`` were not used to choose the defaults (``--tuning`` runs only the
+others, ``--held-out`` only those).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false")
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # ground truth in float64; training stays float32
+
+import numpy as np  # noqa: E402
+
+from metriplex.config import RunConfig  # noqa: E402
+from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
+from metriplex.integrate import scheme_from_name  # noqa: E402
+from metriplex.runs import train_run  # noqa: E402
+from metriplex.systems import generate  # noqa: E402
+from metriplex.systems.zoo import ZOO  # noqa: E402
+
+BAR = 2e-2
+
+
+def _coerce(value: str):
+    for kind in (int, float):
+        try:
+            return kind(value)
+        except ValueError:
+            pass
+    return None if value == "none" else value
+
+
+def standardised_error(model, data, scheme) -> tuple[float, list[float]]:
+    """Mean over trajectories of ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``."""
+    out, xs, lengths = rollout_data(model, data, scheme=scheme)
+    pred = np.asarray(out.xs, np.float64)
+    mean = data.x.mean(axis=0)
+    d = data.x.std(axis=0)
+    d = np.where(d > 0, d, 1.0)
+    errs = []
+    for k, T in enumerate(lengths):
+        p, o = pred[k, :T], xs[k, :T]
+        if not np.all(np.isfinite(p)):
+            errs.append(float("inf"))
+            continue
+        num = np.linalg.norm((p - o) / d)
+        den = np.linalg.norm((o - mean) / d)
+        errs.append(float(num / max(den, 1e-300)))
+    return float(np.mean(errs)), errs
+
+
+def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
+    system = case.system
+    t0 = time.perf_counter()
+    train = generate(system, trajectories=case.trajectories, steps=case.steps, dt=case.dt,
+                     seed=seed)
+    test = generate(system, trajectories=case.test_trajectories, steps=case.horizon_steps,
+                    dt=case.dt, seed=1000 + seed)
+    gen_seconds = time.perf_counter() - t0
+    config = dataclasses.replace(RunConfig(), **dict(case.flags), **overrides)
+    out = workdir / case.name
+    model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
+                                              progress=False)
+    scheme = scheme_from_name(config.scheme)
+    report = evaluate(model, test, scheme=scheme)
+    std_mean, _ = standardised_error(model, test, scheme)
+    truth = evaluate(system.model, test, scheme=scheme_from_name("cn"))
+    flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in case.flags.items()) or "(none)"
+    return {
+        "system": case.name,
+        "n": system.n,
+        "flags": flags,
+        "held_out": case.held_out,
+        "rel_l2": report["rollout_error_mean"],
+        "rel_l2_standardised": std_mean,
+        "failed": int(report["rollout_failures"]),
+        "test_trajectories": case.test_trajectories,
+        "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
+        "train_seconds": seconds,
+        "steps": history.step[-1] if history.step else 0,
+        "stopped": history.stopped,
+        "converged": history.converged,
+        "data_seconds": gen_seconds,
+        "overrides": overrides,
+    }
+
+
+def _fmt(v: float) -> str:
+    return "inf" if not np.isfinite(v) else f"{v:.2e}"
+
+
+def print_table(rows: list[dict], file=sys.stdout) -> None:
+    head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | steps | "
+            "train s | bar |")
+    print(head, file=file)
+    print("|" + "---|" * 10, file=file)
+    for r in rows:
+        met = r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
+        name = r["system"] + (" (held out)" if r["held_out"] else "")
+        print(
+            f"| {name} | {r['n']} | `{r['flags']}` | {_fmt(r['rel_l2'])} | "
+            f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/{r['test_trajectories']} | "
+            f"{_fmt(r['ground_truth_cn_rel_l2'])} | {r['steps']} | {r['train_seconds']:.0f} | "
+            f"{'met' if met else 'NOT met'} |",
+            file=file, flush=True,
+        )
+    met = sum(r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
+              for r in rows)
+    print(f"\n{met} of {len(rows)} cases meet rel. L2 <= {BAR:g} (plain and standardised) with "
+          "0 failed rollouts.", file=file)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--cases", help="comma list of zoo cases (default: all)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--tuning", action="store_true", help="only the cases used to choose defaults")
+    g.add_argument("--held-out", action="store_true", help="only the held-out cases")
+    p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="override a training setting (RunConfig field), e.g. lr=1e-2")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", help="also write the rows to this JSON file")
+    args = p.parse_args(argv)
+    overrides = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        overrides[key.replace("-", "_")] = _coerce(value)
+    names = args.cases.split(",") if args.cases else list(ZOO)
+    unknown = [n for n in names if n not in ZOO]
+    if unknown:
+        p.error(f"unknown zoo case(s) {unknown}; known: {', '.join(ZOO)}")
+    cases = [ZOO[n] for n in names]
+    if args.tuning:
+        cases = [c for c in cases if not c.held_out]
+    if args.held_out:
+        cases = [c for c in cases if c.held_out]
+    print(f"zoo benchmark: {len(cases)} cases, overrides {overrides or 'none'}, "
+          f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in cases:
+            row = run_case(case, overrides, Path(tmp), seed=args.seed)
+            rows.append(row)
+            print(f"  {row['system']}: rel. L2 {_fmt(row['rel_l2'])}, standardised "
+                  f"{_fmt(row['rel_l2_standardised'])}, failed {row['failed']}, "
+                  f"{row['train_seconds']:.0f} s ({row['stopped']})", flush=True)
+    print()
+    print_table(rows)
+    if args.out:
+        Path(args.out).write_text(json.dumps(rows, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

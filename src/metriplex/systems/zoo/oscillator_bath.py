@@ -1,0 +1,146 @@
+r"""A damped Duffing oscillator whose friction heats a bath.
+
+State :math:`x = (q, p, s)`: position, momentum and the bath's entropy. With velocity
+:math:`v = p/m` and bath temperature :math:`\theta = U'(s) = \theta_0 e^{s/c}`,
+
+.. math::
+    E = \frac{p^2}{2m} + \frac{k q^2}{2} + \frac{a q^4}{4} + c\,\theta_0\big(e^{s/c} - 1\big),
+    \qquad S = s,\qquad L\ \text{canonical in}\ (q, p),
+
+.. math::
+    M = \frac{\gamma}{\theta}\,w w^\top,\qquad w = (0,\ \theta,\ -v),
+
+so :math:`M\nabla E = \frac{\gamma}{\theta} w\,(\theta v - v\theta) = 0` and
+:math:`\dot q = v`, :math:`\dot p = -kq - aq^3 - \gamma v`,
+:math:`\dot s = \gamma v^2/\theta \ge 0`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Float
+
+from ..._errors import MetriplexError
+from ..._model import GenericModel
+from ..._types import Matrix, Scalar, State
+from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
+from .._base import Settings, System, _sample_box
+from . import ZooCase
+
+
+@dataclasses.dataclass(frozen=True)
+class OscillatorBathConfig:
+    r"""Parameters of the Duffing oscillator in a bath (SI units, seconds).
+
+    ``mass`` :math:`m` = 1 kg, ``stiffness`` :math:`k` = 4 N/m (small-amplitude period
+    :math:`\pi` s), ``quartic`` :math:`a` = 1 N/m³ (hardening), ``damping`` :math:`\gamma` =
+    0.1 kg/s, bath ``heat_capacity`` :math:`c` = 2 J/K and reference temperature ``theta0``
+    :math:`\theta_0` = 1 K. Initial states ``x0_center + U(-1, 1) * x0_halfwidth``, by default
+    :math:`(0, 0, 0) + U(-1,1)\cdot(1.5, 2, 0.2)`.
+    """
+
+    mass: float = 1.0
+    stiffness: float = 4.0
+    quartic: float = 1.0
+    damping: float = 0.1
+    heat_capacity: float = 2.0
+    theta0: float = 1.0
+    x0_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    x0_halfwidth: tuple[float, float, float] = (1.5, 2.0, 0.2)
+
+    def __post_init__(self):
+        positive = (self.mass, self.stiffness, self.heat_capacity, self.theta0)
+        if not (min(positive) > 0.0 and self.quartic >= 0.0 and self.damping >= 0.0):
+            raise MetriplexError(
+                "oscillator-bath needs positive mass, stiffness, heat_capacity and theta0 and "
+                f"non-negative quartic and damping; got mass={self.mass}, "
+                f"stiffness={self.stiffness}, quartic={self.quartic}, damping={self.damping}, "
+                f"heat_capacity={self.heat_capacity}, theta0={self.theta0}. "
+                "Example: stiffness=4, damping=0.1."
+            )
+
+
+def bath_energy(s, heat_capacity: float, theta0: float):
+    r""":math:`U(s) = c\,\theta_0(e^{s/c} - 1)`, whose derivative is :math:`\theta_0 e^{s/c}`."""
+    return heat_capacity * theta0 * jnp.expm1(s / heat_capacity)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Energy:
+    config: OscillatorBathConfig
+
+    def __call__(self, x: State) -> Scalar:
+        c = self.config
+        q, p, s = x[0], x[1], x[2]
+        mechanical = p**2 / (2.0 * c.mass) + 0.5 * c.stiffness * q**2 + 0.25 * c.quartic * q**4
+        return mechanical + bath_energy(s, c.heat_capacity, c.theta0)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Friction:
+    config: OscillatorBathConfig
+
+    def __call__(self, x: State) -> Matrix:
+        c = self.config
+        v = x[1] / c.mass
+        theta = c.theta0 * jnp.exp(x[2] / c.heat_capacity)
+        w = jnp.stack([jnp.zeros((), x.dtype), theta, -v])
+        return (c.damping / theta) * (w[:, None] * w[None, :])
+
+
+@dataclasses.dataclass(frozen=True)
+class OscillatorBath(System):
+    """A hardening Duffing oscillator with viscous friction that heats one bath (n = 3)."""
+
+    name = "oscillator-bath"
+    description = (
+        "Duffing oscillator (k q^2/2 + a q^4/4) with friction heating a bath: canonical L in "
+        "(q, p), S = s, M = (gamma/theta) w w^T with w = (0, theta, -v)."
+    )
+    config: OscillatorBathConfig = OscillatorBathConfig()
+
+    @property
+    def max_substep(self) -> float:
+        c = self.config
+        q = abs(c.x0_center[0]) + abs(c.x0_halfwidth[0])
+        omega = np.sqrt((c.stiffness + 3.0 * c.quartic * q**2) / c.mass)
+        return float(min(0.005, 0.01 / omega))
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return ("q", "p", "s")
+
+    def _build_model(self) -> GenericModel:
+        return GenericModel(
+            energy=Known(_Energy(self.config)),
+            entropy=SumOf((2,)),
+            poisson=CanonicalPoisson(3, 1),
+            friction=KnownFriction(_Friction(self.config)),
+        )
+
+    @property
+    def defaults(self) -> Settings:
+        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
+
+    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 3"]:
+        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
+        self._check_num(num)
+        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+
+
+CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.022, 300, 32
+
+CASE = ZooCase(
+    system=OscillatorBath(),
+    flags={"poisson": "canonical:1", "entropy": "sum:2"},
+    trajectories=CASE_TRAJECTORIES,
+    steps=CASE_STEPS,
+    dt=CASE_DT,
+    time_unit="s",
+    test_trajectories=10,
+    held_out=False,
+    note="Smallest nonlinear dissipative case: amplitude-dependent frequency, one heated bath.",
+)

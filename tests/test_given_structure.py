@@ -1,0 +1,83 @@
+"""Structure the user knows, given as data: constant L and M from files, a Lie–Poisson prior."""
+
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+import scipy.io
+
+import metriplex as mx
+from metriplex.config import RunConfig, build_model, validate
+from helpers import damped_oscillator, make_data, oscillator_x0
+
+CANONICAL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+
+def test_constant_blocks_check_their_matrices():
+    L = mx.ConstantPoisson(CANONICAL)
+    x = jnp.ones(3)
+    np.testing.assert_array_equal(np.asarray(L(x, x)), CANONICAL)
+    with pytest.raises(mx.MetriplexError, match=r"must be antisymmetric .* max \|L \+ L\^T\| = 2"):
+        mx.ConstantPoisson(np.eye(3))
+    with pytest.raises(mx.MetriplexError, match="must be symmetric"):
+        mx.ConstantFriction(CANONICAL)
+    with pytest.raises(mx.MetriplexError, match="positive semi-definite .* eigenvalue -1"):
+        mx.ConstantFriction(-np.eye(3))
+    with pytest.raises(mx.MetriplexError, match="square n x n matrix"):
+        mx.ConstantFriction(np.ones((2, 3)))
+    M = mx.ConstantFriction(np.diag([0.0, 1.0, 2.0]))
+    assert np.asarray(M(x, x)).shape == (3, 3)
+
+
+def test_lie_poisson_is_linear_and_antisymmetric():
+    L = mx.LiePoisson(3, key=jr.key(0))
+    a, b = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.3, 0.1, -1.0])
+    La, Lb = L(a), L(b)
+    np.testing.assert_allclose(np.asarray(L(2.0 * a - 3.0 * b)), np.asarray(2.0 * La - 3.0 * Lb),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(La), -np.asarray(La).T)
+
+
+@pytest.mark.parametrize("suffix", [".npy", ".npz", ".mat"])
+def test_cli_config_reads_constant_operators(tmp_path, suffix):
+    data = make_data(damped_oscillator(), oscillator_x0(4), 0.1, 10, names=("q", "p", "s"))
+    path = tmp_path / f"ops{suffix}"
+    if suffix == ".npy":
+        np.save(path, CANONICAL)
+    elif suffix == ".npz":
+        np.savez(path, L=CANONICAL)
+    else:
+        scipy.io.savemat(path, {"L": CANONICAL})
+    config = RunConfig(poisson=f"file:{path}", entropy="sum:2", width=8)
+    model = build_model(config, data, key=jr.key(0))
+    assert isinstance(model.poisson, mx.ConstantPoisson)
+    saved = tmp_path / "m.mpx"
+    mx.save(saved, model, n=3)
+    np.testing.assert_array_equal(np.asarray(mx.load(saved).poisson(jnp.ones(3), jnp.ones(3))),
+                                  CANONICAL)
+
+
+def test_cli_config_rejects_a_wrong_operator_file(tmp_path):
+    np.save(tmp_path / "L.npy", np.zeros((4, 4)))
+    with pytest.raises(mx.MetriplexError, match=r"has shape \(4, 4\); the data have 3 variables"):
+        validate(RunConfig(poisson=f"file:{tmp_path / 'L.npy'}"), 3)
+    with pytest.raises(mx.MetriplexError, match="does not exist"):
+        validate(RunConfig(friction=f"file:{tmp_path / 'missing.npy'}"), 3)
+    (tmp_path / "L.txt").write_text("0 1\n-1 0\n")
+    with pytest.raises(mx.MetriplexError, match="reads .npy, .npz or .mat"):
+        validate(RunConfig(poisson=f"file:{tmp_path / 'L.txt'}"), 2)
+
+
+def test_zoo_cases_are_registered_and_distinct_from_the_reference_systems():
+    from metriplex.systems import SYSTEMS
+    from metriplex.systems.zoo import ZOO
+
+    assert len(ZOO) >= 8
+    ns = sorted(c.system.n for c in ZOO.values())
+    assert ns[0] <= 2 and ns[-1] >= 30
+    assert any(c.held_out for c in ZOO.values()) and not all(c.held_out for c in ZOO.values())
+    for name, case in ZOO.items():
+        assert SYSTEMS[name] is case.system
+        assert name not in ("rigid-body", "pendulum-energetic", "pendulum-temperature",
+                            "gas-containers")
+        validate(RunConfig(**dict(case.flags)), case.system.n)
