@@ -22,7 +22,9 @@ SCRIPT = textwrap.dedent(
                                mx.CanonicalPoisson(3, 1), mx.CholeskyFriction(3, width=16, key=k[1]))
     out = []
     for parallel in (False, True):
-        m, h = mx.fit(model(), data, steps=200, batch_size=64, progress=False,
+        # lr 1e-3: the two runs differ in the order of the gradient's sum; a small rate keeps
+        # that rounding from being amplified beyond the tolerance within 200 steps.
+        m, h = mx.fit(model(), data, steps=200, batch_size=64, learning_rate=1e-3, progress=False,
                       data_parallel=parallel, key=jr.key(1))
         out.append((np.asarray(jax.vmap(m.vector_field)(jnp.asarray(data.x[:20]))), h.valid["total"]))
     np.testing.assert_allclose(out[0][0], out[1][0], rtol=1e-8, atol=1e-10)

@@ -305,8 +305,10 @@ def test_generate_api():
 
 # -- registry, parameters, sampling ---------------------------------------------------------------
 def test_registry_and_errors():
+    from metriplex.systems.zoo import ZOO
+
     assert set(SYSTEMS) == {"rigid-body", "pendulum-energetic", "pendulum-temperature",
-                            "gas-containers"}
+                            "gas-containers"} | set(ZOO)
     for name, s in SYSTEMS.items():
         assert s.name == name and len(s.names) == s.n
         assert name in s.help_text() and "dt=" in s.help_text() and s.description

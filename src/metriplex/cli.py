@@ -42,6 +42,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "
                    "is evaluated on (default: all; fewer is cheaper, still unbiased)")
+    g.add_argument("--quadratic", action="store_true", default=None,
+                   help="add a learned quadratic form to the learned E and S networks (a "
+                   "second-order Taylor term that extrapolates the forces linearly; off by "
+                   "default)")
     g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
                    f"energy, entropy, friction (default {d.features_for})")

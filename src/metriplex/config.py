@@ -64,6 +64,7 @@ class RunConfig:
     w_degeneracy_L: float = 10.0
     w_degeneracy_M: float = 10.0
     w_jacobi: float = 1.0
+    quadratic: bool = False
     width: int = 64
     depth: int = 2
     activation: str = "softplus"
@@ -359,11 +360,12 @@ def build_model(config: RunConfig, data: Trajectories, *, key,
     blocks = _feature_blocks(config)
     feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
     energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
-                          key=kE, **net)
+                          quadratic=bool(config.quadratic), key=kE, **net)
     entropy = _known_entropy(config, n)
     if entropy is None:
         entropy = MLPPotential(n, features=feats["entropy"], data=x,
-                               output_scale=units.entropy, key=kS, **net)
+                               output_scale=units.entropy, quadratic=bool(config.quadratic),
+                               key=kS, **net)
     poisson_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.energy))
     friction_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.entropy))
     exact_L, exact_M = exact_blocks(config)

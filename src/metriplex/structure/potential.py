@@ -10,6 +10,7 @@ import abc
 from typing import Any, Callable
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -105,6 +106,7 @@ class MLPPotential(AbstractPotential):
     shift: tuple[float, ...] | None = eqx.field(static=True)
     scale: tuple[float, ...] | None = eqx.field(static=True)
     output_scale: float = eqx.field(static=True)
+    quadratic: jax.Array | None
 
     def __init__(
         self,
@@ -118,6 +120,7 @@ class MLPPotential(AbstractPotential):
         shift=None,
         scale=None,
         output_scale: float = 1.0,
+        quadratic: bool = False,
         key,
     ):
         import jax.random as jr
@@ -141,13 +144,21 @@ class MLPPotential(AbstractPotential):
             shift, scale = data_statistics(z)
         self.shift = None if shift is None else tuple(float(v) for v in shift)
         self.scale = None if scale is None else tuple(float(v) for v in scale)
-        hkey, okey = jr.split(key)
+        hkey, okey, qkey = jr.split(key, 3)
         self.hidden = Hidden(in_size, width, depth, activation, key=hkey)
         self.out = eqx.nn.Linear(width, "scalar", key=okey)
+        # A learned quadratic form beside the network: the second-order Taylor term, which
+        # extrapolates linearly in the forces where the network alone would be arbitrary.
+        self.quadratic = (jr.normal(qkey, (in_size, in_size)) / np.sqrt(in_size)
+                          if quadratic else None)
 
     def __call__(self, x: State) -> Scalar:
         z = x if self.features is None else self.features(x)
-        y = self.out(self.hidden(standardise(z, self.shift, self.scale)))
+        z = standardise(z, self.shift, self.scale)
+        y = self.out(self.hidden(z))
+        if self.quadratic is not None:
+            W = self.quadratic.astype(z.dtype)
+            y = y + 0.25 * (z @ (W + W.T) @ z)
         return y if self.output_scale == 1.0 else self.output_scale * y
 
     def spec(self):
@@ -160,6 +171,7 @@ class MLPPotential(AbstractPotential):
             "shift": self.shift,
             "scale": self.scale,
             "output_scale": self.output_scale,
+            "quadratic": self.quadratic is not None,
         }
 
     @classmethod
@@ -174,6 +186,7 @@ class MLPPotential(AbstractPotential):
             shift=spec.get("shift"),
             scale=spec.get("scale"),
             output_scale=spec.get("output_scale", 1.0),
+            quadratic=spec.get("quadratic", False),
             key=key,
         )
 
