@@ -61,6 +61,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
+    w.add_argument("--weight-decay", type=float,
+                   help=f"AdamW weight decay (default {d.weight_decay})")
     w.add_argument("--steps", type=int, help=f"the most optimiser steps (default {d.steps}); "
                    "training usually stops earlier, when the held-out rollouts stop improving")
     w.add_argument("--max-minutes", type=float, help="stop training after this many minutes "
@@ -135,12 +137,19 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
         ended += "; the best model is the last one: not converged, allow more --steps"
+    if history.best_step == 0 and last > 0:
+        ended += ("; NO trained model rolled out the held-out trajectories better than the "
+                  "untrained one (kept): the data do not determine the dynamics away from the "
+                  "training trajectories; give more trajectories or more of the structure")
     k = metrics.get("trajectories", 0)
     failed = metrics.get("rollout_failures", 0)
     err = metrics.get("rollout_error_mean")
     where = metrics.get("evaluated_on", "")
     if failed:
         rollouts = f"{failed} of {k} rollouts on {where} FAILED (blew up or did not converge)"
+        done = metrics.get("rollout_error_mean_completed")
+        if done is not None:
+            rollouts += f"; error of the {k - failed} completed: {done:.3e}"
     else:
         rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
     return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
@@ -254,7 +263,7 @@ def cmd_reproduce(args) -> None:
     from .experiments import run_experiment
 
     run_experiment(args.experiment, quick=args.quick, out=args.out, overwrite=args.overwrite,
-                   degeneracy=args.degeneracy, progress=not args.quiet)
+                   degeneracy=args.degeneracy, progress=not args.quiet, defaults=args.defaults)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -327,6 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="reduced size (about two minutes)")
     p.add_argument("--out", default=None, help="output folder (default runs/EXPERIMENT)")
     p.add_argument("--degeneracy", default="soft", help="soft | exact")
+    p.add_argument("--defaults", action="store_true",
+                   help="train with the experiment's structure only (what is learned, what is "
+                   "given) and default settings, as without a preset")
     p.add_argument("--overwrite", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_reproduce)

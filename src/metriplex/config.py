@@ -69,6 +69,7 @@ class RunConfig:
     depth: int = 2
     activation: str = "softplus"
     lr: float = 1e-2
+    weight_decay: float = 0.0
     steps: int = 30_000
     batch_size: int = 256
     validation: float = 0.2
@@ -171,6 +172,8 @@ def validate(config: RunConfig, n: int) -> None:
             raise MetriplexError(f"--{name.replace('_', '-')} must be positive; got {v}.")
     if not config.lr > 0:
         raise MetriplexError(f"--lr must be > 0; got {config.lr}.")
+    if not config.weight_decay >= 0:
+        raise MetriplexError(f"--weight-decay must be >= 0; got {config.weight_decay}.")
     if not 0 <= config.validation < 1:
         raise MetriplexError(f"--validation must lie in [0, 1); got {config.validation}.")
     for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi"):

@@ -126,6 +126,7 @@ def evaluate(
         per_traj.append(_relative_error(p, o))
         per_var_num += np.sum((p - o) ** 2, axis=0)
         per_var_den += np.sum(o**2, axis=0)
+    completed = any(np.isfinite(e) for e in per_traj)
     E = _potential_along(model, model.energy, np.nan_to_num(pred))
     S = _potential_along(model, model.entropy, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac = [], [], [], []
@@ -149,11 +150,14 @@ def evaluate(
         "scheme": scheme.name,
         "rollout_error": per_traj,
         "rollout_error_mean": float(np.mean(per_traj)),
+        # Over the completed rollouts only; null (never 0.0) when every rollout failed.
         "rollout_error_per_variable": {
-            name: float(np.sqrt(a / max(b, _TINY)))
+            name: float(np.sqrt(a / max(b, _TINY))) if completed else None
             for name, a, b in zip(data.names, per_var_num, per_var_den)
         },
         "rollout_failures": int(np.sum(failed >= 0)),
+        "rollout_error_mean_completed": (
+            float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None),
         "energy_relative_drift": float(np.max(drifts)) if drifts else 0.0,
         "energy_drift_over_data_spread": float(np.max(drifts_gauge)) if drifts_gauge else 0.0,
         "entropy_min_step": float(np.min(dS_min)) if dS_min else 0.0,

@@ -91,6 +91,7 @@ def train_run(
             train,
             loss=loss,
             learning_rate=config.lr,
+            weight_decay=config.weight_decay,
             steps=config.steps,
             batch_size=config.batch_size,
             validation=valid,

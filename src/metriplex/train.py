@@ -212,12 +212,15 @@ def _batch_sharding(enabled: bool, batch_size: int):
     return shard
 
 
-def adjustable_optimizer(learning_rate: float, warmup: int = 100) -> optax.GradientTransformation:
+def adjustable_optimizer(learning_rate: float, warmup: int = 100,
+                         weight_decay: float = 0.0) -> optax.GradientTransformation:
     """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
-    whose learning rate :func:`fit` can change between chunks (:func:`set_learning_rate`)."""
+    whose learning rate :func:`fit` can change between chunks (:func:`set_learning_rate`);
+    ``weight_decay`` > 0 makes it AdamW (decoupled decay of every weight)."""
     return optax.chain(
         optax.clip_by_global_norm(10.0),
         optax.scale_by_adam(),
+        optax.add_decayed_weights(weight_decay) if weight_decay else optax.identity(),
         optax.scale_by_schedule(
             optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
         ),
@@ -311,6 +314,7 @@ def fit(
     loss: Loss | None = None,
     optimizer: optax.GradientTransformation | None = None,
     learning_rate: float = 1e-2,
+    weight_decay: float = 0.0,
     steps: int = 30_000,
     batch_size: int = 256,
     validation: float | Trajectories | None = 0.2,
@@ -349,6 +353,8 @@ def fit(
     learning_rate:
         Peak Adam learning rate (default 1e-2; every loss is measured in the data's own units,
         so one rate serves data of any scale).
+    weight_decay:
+        Decoupled weight decay (AdamW) of the default optimiser (default 0).
     steps:
         The most optimiser steps (default 30 000).
     validation:
@@ -426,7 +432,7 @@ def fit(
 
     if optimizer is None:
         optimizer = (default_optimizer(learning_rate, steps) if stopping is None
-                     else adjustable_optimizer(learning_rate))
+                     else adjustable_optimizer(learning_rate, weight_decay=weight_decay))
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
     adjustable = stopping is not None and _lr_state(opt_state) is not None

@@ -24,7 +24,11 @@ import numpy as np
 from .. import plots
 from .._errors import MetriplexError
 from .._model import float_dtype, with_dtype
-from ..config import RunConfig, preset
+from ..config import PRESETS, RunConfig, preset
+
+#: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
+#: keeps only these from a preset).
+STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
 from ..diagnostics import error_over_time, evaluate, rollout_data, time_to_error
 from ..integrate import CrankNicolson, scheme_from_name
 from ..io import write, write_json
@@ -131,12 +135,16 @@ def run_experiment(
     degeneracy: str = "soft",
     progress: bool = True,
     size: Size | None = None,
+    defaults: bool = False,
     **overrides,
 ) -> dict[str, Any]:
     """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
 
     ``size`` replaces the experiment's data and training sizes (e.g. to study coverage);
-    ``overrides`` replace fields of its :class:`~metriplex.config.RunConfig`.
+    ``overrides`` replace fields of its :class:`~metriplex.config.RunConfig`. With
+    ``defaults=True`` the run uses only the preset's structure (what is learned and what is
+    given, and the Jacobi penalty for a learned L) and every other setting at its default, as a
+    user without the preset would: no features, default learning rate, steps and schedule.
     """
     from ..systems import generate, get_system
 
@@ -144,7 +152,8 @@ def run_experiment(
     if degeneracy not in ("soft", "exact"):
         raise MetriplexError(f"--degeneracy must be soft or exact; got {degeneracy!r}.")
     size = size if size is not None else exp.quick if quick else exp.full
-    out = Path(out) if out is not None else Path("runs") / (name + ("-quick" if quick else ""))
+    suffix = ("-defaults" if defaults else "") + ("-quick" if quick else "")
+    out = Path(out) if out is not None else Path("runs") / (name + suffix)
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     system = get_system(exp.system, **exp.system_params)
     t0 = time.perf_counter()
@@ -152,15 +161,22 @@ def run_experiment(
     test = generate(system, trajectories=size.test_trajectories, steps=size.test_steps,
                     dt=exp.dt, seed=10_000)
     gen_seconds = time.perf_counter() - t0
-    config = preset(name, steps=size.train_steps, degeneracy=degeneracy,
-                    eval_every=max(size.train_steps // 50, 10), **exp.overrides)
+    if defaults:
+        structure = {k: v for k, v in PRESETS[name].items() if k in STRUCTURE_KEYS}
+        config = RunConfig(**structure)
+        if quick:
+            config = dataclasses.replace(config, steps=size.train_steps)
+    else:
+        config = preset(name, steps=size.train_steps, degeneracy=degeneracy,
+                        eval_every=max(size.train_steps // 50, 10), **exp.overrides)
     config = dataclasses.replace(config, **overrides)
     model, history, train, valid, seconds = train_run(
         data, config, out, overwrite=overwrite, progress=progress
     )
     write(out / "train_data.npz", data)
     write(out / "test_data.npz", test)
-    scheme = scheme_from_name(exp.rollout_scheme)
+    rollout_scheme = config.scheme if defaults else exp.rollout_scheme
+    scheme = scheme_from_name(rollout_scheme)
     horizon = exp.horizon
     metrics = evaluate(model, test, scheme=scheme, horizon=horizon)
     truth = evaluate(jax.tree_util.tree_map(lambda a: a, system.model), test,
@@ -170,11 +186,12 @@ def run_experiment(
                               "rollout_error_to_horizon_mean") if k in truth
     }
     metrics.update(
-        experiment=name, quick=quick, degeneracy=degeneracy, train_seconds=seconds,
+        experiment=name, quick=quick, defaults=defaults,
+        degeneracy=config.degeneracy, train_seconds=seconds,
         data_seconds=gen_seconds, train_trajectories=len(train),
         validation_trajectories=0 if valid is None else len(valid),
         test_trajectories=len(test), dt=exp.dt, stopped=history.stopped,
-        size=dataclasses.asdict(size), rollout_scheme=exp.rollout_scheme,
+        size=dataclasses.asdict(size), rollout_scheme=rollout_scheme,
         best_step=history.best_step,
     )
     untrained = _untrained_error(config, train, test, scheme, horizon)
