@@ -10,8 +10,6 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import jax
-import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
 
@@ -33,7 +31,6 @@ from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, Zer
 from .structure.lie_poisson import LiePoisson
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
 from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
-from .structure.scaling import Scaling
 
 FEATURES = {
     # The seed paper's pendulum featurisation: (|q1|^2, |q2 - q1|^2, |p1|^2, |p2|^2, s1, s2).
@@ -298,54 +295,12 @@ def _known_entropy(config: RunConfig, n: int):
     return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
 
 
-def _rms_nonzero(a: np.ndarray) -> float | None:
-    """Root mean square of the entries that are not zero everywhere (``None`` if all are)."""
-    a = np.asarray(a, dtype=np.float64)
-    live = np.any(a != 0, axis=0)
-    if not np.any(live):
-        return None
-    return float(np.sqrt(np.mean(a[:, live] ** 2)))
-
-
-def _sample(x: np.ndarray, k: int = 256) -> jax.Array:
-    idx = np.linspace(0, len(x) - 1, min(k, len(x))).astype(int)
-    return jnp.asarray(x[idx])
-
-
 def units_for(config: RunConfig, data: Trajectories) -> Units:
-    r"""The data's :class:`~metriplex.data.Units`, with the potentials' scales chosen so that
-    every learned block is of order one in them.
-
-    A learned energy that pairs with a **given** :math:`L` must supply the rates by itself:
-    :math:`\sigma_E = 1/(\tau\,\operatorname{rms}(D^{-1}LD^{-\top}))`. A given entropy
-    sets :math:`\sigma_S = \operatorname{rms}(D\nabla S)` (for :math:`S = s_1 + s_2`, the
-    scale of the :math:`s_i`). Where both partners are learned the scale is 1 (the pair's
-    common factor is not identifiable, so any choice is as good).
-    """
-    units = Units.from_data(data)
+    """The data's :class:`~metriplex.data.Units` for the blocks that ``config`` gives."""
     n = data.n
-    x = _sample(data.x)
-    d = np.asarray(units.scale)
-    known_L = _known_poisson(config, n)
-    known_S = _known_entropy(config, n)
-    energy = 1.0
-    if known_L is not None:
-        zero = jnp.zeros_like(x)
-        mats = np.asarray(jax.vmap(known_L)(x, zero)) / np.outer(d, d)[None]
-        size = _rms_nonzero(mats.reshape(len(x), -1))
-        if size is not None:
-            energy = 1.0 / (units.time * size)
-    entropy = 1.0
-    known_M = _known_friction(config, n)
-    if known_S is not None:
-        grads = np.asarray(jax.vmap(jax.grad(known_S))(x)) * d[None]
-        entropy = _rms_nonzero(grads) or 1.0
-    elif known_M is not None:
-        mats = np.asarray(jax.vmap(known_M)(x, jnp.zeros_like(x))) / np.outer(d, d)[None]
-        size = _rms_nonzero(mats.reshape(len(x), -1))
-        if size is not None:
-            entropy = 1.0 / (units.time * size)
-    return dataclasses.replace(units, energy=float(energy), entropy=float(entropy))
+    return Units.from_data(data, poisson=_known_poisson(config, n),
+                           entropy=_known_entropy(config, n),
+                           friction=_known_friction(config, n))
 
 
 def build_model(config: RunConfig, data: Trajectories, *, key,
@@ -369,8 +324,8 @@ def build_model(config: RunConfig, data: Trajectories, *, key,
         entropy = MLPPotential(n, features=feats["entropy"], data=x,
                                output_scale=units.entropy, quadratic=bool(config.quadratic),
                                key=kS, **net)
-    poisson_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.energy))
-    friction_scaling = Scaling(units.shift, units.scale, 1.0 / (units.time * units.entropy))
+    poisson_scaling = units.poisson_scaling()
+    friction_scaling = units.friction_scaling()
     exact_L, exact_M = exact_blocks(config)
     poisson = _known_poisson(config, n)
     if config.poisson == "neural":

@@ -58,7 +58,7 @@ class StiffThermalOscillatorConfig:
       :math:`(0, 0, 0) + U(-1,1)\cdot(1.2, 1.2, 10^{-3})` (:math:`\theta_1` within 300 ± 30 K),
       and :math:`s_2` such that :math:`\theta_2 = \theta_1 (1 + \text{imbalance}\cdot U(-1, 1))`,
       ``imbalance`` = 2e-3 (reservoirs start near equilibrium, as the fast conduction keeps
-      them; friction heating then warms both by up to about 30 K).
+      them; friction heating then warms both by up to about 40 K).
     """
 
     mass: float = 1.0
