@@ -72,8 +72,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help=f"fraction of trajectories held out (default {d.validation})")
     w.add_argument("--eval-every", type=int, help=f"steps between validations (default {d.eval_every})")
     w.add_argument("--patience", type=int, help="validations without improvement before the "
-                   "learning rate is cut (x0.3, from the best model; after 3 cuts training "
-                   "stops; default 8)")
+                   "learning rate is cut (x0.3, from the best model; after --lr-cuts cuts "
+                   "training stops; default 20)")
+    w.add_argument("--lr-cuts", type=int, help="learning-rate cuts before training stops "
+                   f"(default {d.lr_cuts})")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")

@@ -72,6 +72,7 @@ class RunConfig:
     validation: float = 0.2
     eval_every: int = 100
     patience: int | None = None
+    lr_cuts: int = 3
     max_minutes: float | None = None
     seed: int = 0
     float64: bool = False
@@ -161,6 +162,8 @@ def validate(config: RunConfig, n: int) -> None:
         )
     if config.patience is not None and config.patience < 1:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
+    if config.lr_cuts < 0:
+        raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise MetriplexError(f"--max-minutes must be > 0; got {config.max_minutes}.")
     for name in ("width", "depth", "steps", "batch_size", "eval_every"):

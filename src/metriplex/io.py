@@ -51,9 +51,23 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[Any]:
 
 
 def write_json(path, obj) -> None:
+    """Strict JSON (what every reader accepts): a NaN or infinite number is written as ``null``;
+    the file that holds it says why (e.g. ``rollout_failures`` beside a null error)."""
     with atomic_write(path, "w") as f:
-        json.dump(obj, f, indent=2, default=_json_default)
+        json.dump(_strict(obj), f, indent=2, default=_json_default, allow_nan=False)
         f.write("\n")
+
+
+def _strict(o):
+    if isinstance(o, dict):
+        return {k: _strict(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_strict(v) for v in o]
+    if isinstance(o, (np.ndarray, jax.Array)):
+        return _strict(np.asarray(o).tolist())
+    if isinstance(o, (float, np.floating)) and not np.isfinite(o):
+        return None
+    return o
 
 
 def _json_default(o):

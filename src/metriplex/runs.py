@@ -24,7 +24,7 @@ from .data import Trajectories, state_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
 from .io import save, write_json
-from .train import fit
+from .train import Plateau, fit
 
 
 def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
@@ -97,6 +97,7 @@ def train_run(
             validation=valid,
             eval_every=config.eval_every,
             patience=config.patience,
+            stopping=Plateau(cuts=config.lr_cuts),
             max_seconds=None if config.max_minutes is None else 60.0 * config.max_minutes,
             scale=units.rate,
             dtype=dtype,

@@ -71,7 +71,7 @@ class Plateau:
     ```
     """
 
-    patience: int = 8
+    patience: int = 20
     factor: float = 0.3
     cuts: int = 3
     min_delta: float = 1e-3
