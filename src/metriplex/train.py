@@ -235,6 +235,11 @@ def _lr_state(opt_state):
     return last if isinstance(hyper, dict) and "step_size" in hyper else None
 
 
+def _current_lr(opt_state, default: float) -> float:
+    last = _lr_state(opt_state)
+    return default if last is None else -float(last.hyperparams["step_size"])
+
+
 def set_learning_rate(opt_state, learning_rate: float):
     """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
     last = _lr_state(opt_state)
@@ -339,7 +344,8 @@ def fit(
     warm-up; after ``stopping.patience`` evaluations without improvement the learning rate is
     cut (``stopping.factor``) and training resumes from the best model; after
     ``stopping.cuts`` plateaus it stops (``history.converged``). ``steps`` (and
-    ``max_seconds``) cap the run. The validation score is the error of short rollouts of the
+    ``max_seconds``) cap the run; over the last fifth of ``steps`` the rate is annealed
+    (cosine to 1%), so a run that the cap ends still finishes on a small rate. The validation score is the error of short rollouts of the
     held-out trajectories (``rollout_check``), so the model kept is the one that rolls out
     best, not only the one with the smallest pair residual.
 
@@ -511,9 +517,17 @@ def fit(
     skip_evaluation = resume
     bar = tqdm(total=steps, initial=done, disable=not progress, desc="fit", unit="step", leave=False)
 
+    # The last fifth of the step budget anneals the rate (cosine to 1%), so a run that the
+    # budget ends before it converges still finishes on a small learning rate.
+    anneal_from = int(0.8 * steps)
+
     def run_next_chunk():
         nonlocal key, params, opt_state, train_value, train_parts, done
         length = min(eval_every, steps - done)
+        if adjustable and done >= anneal_from:
+            frac = (done - anneal_from) / max(steps - anneal_from, 1)
+            opt_state = set_learning_rate(
+                opt_state, lr * (0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))))
         key, sub = jr.split(key)
         params, opt_state, value, parts = run_chunk(params, opt_state, sub, length, full_train)
         train_value = float(value)
@@ -540,7 +554,7 @@ def fit(
                 va_total, va_parts = tr_total, {}
             history.step.append(done)
             history.time.append(time.perf_counter() - start)
-            history.learning_rate.append(lr)
+            history.learning_rate.append(_current_lr(opt_state, lr))
             for name, v in tr_parts.items():
                 history.train.setdefault(name, []).append(v)
             history.train.setdefault("total", []).append(tr_total)
