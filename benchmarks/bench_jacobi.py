@@ -14,7 +14,8 @@ Times are per step, medians over repeats after compilation (each repeat averages
 to last ~0.1 s), in float32 on one pinned compute thread. ``cpu ms`` is process CPU time per
 step, which other processes on a shared machine disturb far less than ``wall ms``; ``x none``
 is the ratio of CPU times to the ``none`` step of the same ``n``. Modes are interleaved repeat
-by repeat. Compare ratios within one run, never absolute times across runs (DESIGN.md §6).
+by repeat. Compare ratios within one run, never absolute times across runs (docs/design.md,
+'Performance rules').
 
     python benchmarks/bench_jacobi.py            # n = 3, 10, 30, 100, batch 256
     python benchmarks/bench_jacobi.py --quick    # n = 3, 10, batch 64 (CI smoke test)

@@ -1,6 +1,7 @@
 """Does enforcing the Jacobi identity help? Learn the free rigid body (L and E) four ways.
 
-Truth (PHYSICS.md §1): E = ½ Σ mᵢ²/Iᵢ with I = (10, 20, 40), L(m)ᵢⱼ = −εᵢⱼₖ mₖ, S = 0, M = 0.
+Truth (docs/physics.md, 'Free rigid body'): E = ½ Σ mᵢ²/Iᵢ with I = (10, 20, 40),
+L(m)ᵢⱼ = −εᵢⱼₖ mₖ, S = 0, M = 0.
 Data: Crank–Nicolson trajectories (``metriplex.solve``), dt = 2π/100, initial states drawn in a
 shell 0.5 ≤ |m| ≤ 1.5. Learned: an MLP energy and
 

@@ -7,14 +7,15 @@ float64 from the same initial states. Reported per scheme: the maximum error aga
 max |E(t) - E(0)| / |E(0)|, the smallest entropy change of one step, the mean Newton
 iterations per step, and the wall time per trajectory-step (batched rollout, compiled, best of
 ``--repeats``). A second table times the batched float32 Crank–Nicolson and discrete-gradient
-rollouts of 64 unit pendulums x 1000 steps (DESIGN.md §6).
+rollouts of 64 unit pendulums x 1000 steps (targets in docs/performance.md).
 
 ```
 .venv/bin/python benchmarks/bench_schemes.py                       # print the tables
 .venv/bin/python benchmarks/bench_schemes.py --write docs/schemes.md  # and update the docs
 ```
 
-One compute thread is pinned, as DESIGN.md §6 asks; compare times within one run only.
+One compute thread is pinned, as docs/design.md, 'Performance rules', asks; compare times within
+one run only.
 """
 
 from __future__ import annotations
@@ -49,8 +50,9 @@ BEGIN, END = "<!-- bench_schemes:begin -->", "<!-- bench_schemes:end -->"
 
 def cases(quick: bool):
     """(label, system, dt, steps): the published settings, plus the unit pendulum at dt=0.01
-    (PHYSICS.md's second column) and the pendulum in (q, p, theta) at dt=0.1, where PHYSICS.md §3
-    reports negative entropy steps of Crank–Nicolson."""
+    (the finer step of docs/physics.md, 'Numerics of the pendulum') and the pendulum in
+    (q, p, theta) at dt=0.1, where docs/physics.md, 'Thermoelastic pendulum in temperature
+    variables', notes negative entropy steps of Crank–Nicolson."""
     unit = get_system("pendulum-energetic", parameter_set="unit")
     spnn = get_system("pendulum-energetic", parameter_set="spnn")
     rigid = get_system("rigid-body")
@@ -150,7 +152,8 @@ def accuracy_table(trajectories: int, repeats: int, quick: bool) -> str:
 
 
 def throughput_table(repeats: int) -> str:
-    """64 unit pendulums x 1000 steps in float32 (DESIGN.md §6's target: <= 0.3 s for CN)."""
+    """64 unit pendulums x 1000 steps in float32 (the target in docs/performance.md: <= 0.3 s for
+    CN)."""
     system = get_system("pendulum-energetic", parameter_set="unit")
     x0 = jnp.asarray(system.sample_initial(64, seed=0), jnp.float32)
     lines = [

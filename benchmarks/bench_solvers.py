@@ -12,7 +12,8 @@ largest relative energy drift over t in [0, 100].
 .venv/bin/python benchmarks/bench_solvers.py --repeats 1 --steps 50   # smoke test
 ```
 
-One compute thread is pinned (DESIGN.md section 6); compare times within one run only.
+One compute thread is pinned (docs/design.md, 'Performance rules'); compare times within one run
+only.
 """
 
 from __future__ import annotations

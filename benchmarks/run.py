@@ -24,8 +24,9 @@ What is measured, and how:
   x 1000 steps, the pendulum ground truth and an untrained learned-size model.
 - **time to accuracy**: ``runs/*/metrics.json`` of reference experiments, if present.
 
-One compute thread is pinned by default (DESIGN.md §6): on a shared machine, compare ratios
-within one run, never absolute times across runs. ``--threads 0`` leaves XLA's default.
+One compute thread is pinned by default (docs/design.md, 'Performance rules'): on a shared
+machine, compare ratios within one run, never absolute times across runs. ``--threads 0``
+leaves XLA's default.
 """
 
 from __future__ import annotations

@@ -1,5 +1,5 @@
 """The command line: bad input gets one clear message and exit status 2, no traceback, and no
-existing file is modified; the DESIGN.md §3 forms work end to end."""
+existing file is modified; the forms of docs/design.md, 'Command line', work end to end."""
 
 import contextlib
 import hashlib

@@ -209,7 +209,8 @@ def test_second_order_on_a_dissipative_problem_and_exact_balance(damped_rollouts
 
 
 def _spnn_pendulum():
-    """The ``spnn`` pendulum from metriplex.systems (PHYSICS.md §2), with its initial states."""
+    """The ``spnn`` pendulum from metriplex.systems (docs/physics.md, 'Parameter sets'), with its
+    initial states."""
     from metriplex.systems import get_system
 
     pend = get_system("pendulum-energetic", parameter_set="spnn")

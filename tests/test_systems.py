@@ -120,7 +120,8 @@ def test_rigid_body_is_euler():
 
 
 def _pendulum_explicit(c: PendulumConfig, x: np.ndarray) -> np.ndarray:
-    """PHYSICS.md §2 written out by hand (numpy, float64), states in (q, p, s)."""
+    """docs/physics.md, 'Thermoelastic pendulum in entropy variables', written out by hand (numpy,
+    float64), states in (q, p, s)."""
     q1, q2, p1, p2, s = x[:, 0:2], x[:, 2:4], x[:, 4:6], x[:, 6:8], x[:, 8:10]
     d = q2 - q1
     r1, r2 = np.sum(q1**2, axis=1), np.sum(d**2, axis=1)
@@ -176,7 +177,8 @@ def test_pendulum_temperature_is_the_transformed_flow(case):
     pairs = ((s.model.energy, energetic.model.energy), (s.model.entropy, energetic.model.entropy))
     for a, b in pairs:
         np.testing.assert_allclose(batched(a)(xt), batched(b)(xs), rtol=0.0, atol=1e-14 * term)
-    # The explicit temperature equation of PHYSICS.md §3.
+    # The explicit temperature equation of docs/physics.md, 'Thermoelastic pendulum in temperature
+    # variables'.
     c = s.config
     x = np.asarray(xs)
     f = _pendulum_explicit(c, x)

@@ -1,7 +1,7 @@
 r"""Trajectory files besides the native long table: HDF5 and MATLAB ``.mat``.
 
-Both hold the same observations as the long table of DESIGN.md §2 (rows of ``trajectory``,
-``t``, ``x``), laid out the way users of those formats already store them.
+Both hold the same observations as the long table of docs/design.md, 'Trajectory data' (rows
+of ``trajectory``, ``t``, ``x``), laid out the way users of those formats already store them.
 
 **HDF5** (``.h5``, ``.hdf5``), read and written::
 
@@ -28,8 +28,8 @@ layouts; shapes are MATLAB's ``size()``:
    trajectory; times are then ``0, dt, 2 dt, ...``). With both, the vector is used and the step
    must match its spacing (to 0.1 %). Optional: ``trajectory_ids`` ``(K,)``; constant operators
    ``L`` and ``M`` ``(n, n)``, dense or sparse (see :func:`read_mat_operators`).
-2. *Long table* — the layout of DESIGN.md §2: ``trajectory`` ``(N,)``, ``t`` ``(N,)``,
-   ``x`` ``(N, n)``; ragged lengths allowed.
+2. *Long table* — the layout of docs/design.md, 'Trajectory data': ``trajectory`` ``(N,)``,
+   ``t`` ``(N,)``, ``x`` ``(N, n)``; ragged lengths allowed.
 
 In both, variable names are an optional cell array of strings (or a char matrix) named one of
 ``names, var_names, variables, labels``. When the file's top level holds none of these

@@ -1,4 +1,5 @@
-r"""Trajectory data: the long table of DESIGN.md §2, training pairs, and splits by trajectory.
+r"""Trajectory data: the long table (docs/design.md, 'Trajectory data'), training pairs, and
+splits by trajectory.
 
 A :class:`Trajectories` holds one row per observed state: ``trajectory`` (integer id), ``t``
 (time) and ``x`` (the ``n`` state variables). Rows of one trajectory are ordered by strictly

@@ -1,6 +1,6 @@
 """Reading and writing trajectories and model files.
 
-Trajectories use the long table of DESIGN.md §2 in NPZ (native) or CSV, and are also read from
+Trajectories: the long table (docs/design.md, 'Trajectory data') in NPZ or CSV; also read from
 and written to HDF5 (one group per trajectory) and MATLAB ``.mat`` (see ``_formats``). Model files are a
 JSON header followed by ``equinox.tree_serialise_leaves`` bytes: loading reads numbers only and
 never executes code (no pickle). Every file is written atomically: to a temporary file in the
@@ -84,7 +84,7 @@ def _json_default(o):
 
 def read(path: str | os.PathLike) -> Trajectories:
     """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``) or MATLAB
-    (``.mat``). The layouts are in DESIGN.md §2 and :mod:`metriplex._formats`.
+    (``.mat``). Layouts: docs/design.md, 'Trajectory data', and :mod:`metriplex._formats`.
 
     A malformed file raises :class:`MetriplexError` naming the file, the rule it breaks, the
     value found and the fix.

@@ -2,7 +2,8 @@
 
 The structured outputs (antisymmetric L, lower-triangular B) are assembled by folding a fixed
 linear map into the last layer rather than by index gather/scatter: XLA's CPU backward of
-gathers costs ~30x its forward (see DESIGN.md §6), a folded matmul costs nothing extra.
+gathers costs ~30x its forward (see docs/design.md, 'Performance rules'), a folded matmul
+costs nothing extra.
 """
 
 from __future__ import annotations

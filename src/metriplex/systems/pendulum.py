@@ -51,7 +51,7 @@ class PendulumConfig:
     per component (order ``q1x, q1y, q2x, q2y, p1x, p1y, p2x, p2y, s1, s2``):
 
     - ``unit``: centre ``(1, 0, 2.2, 0, 0, 2, 1, 0, 1, 0.2)``, half-width 0.1 everywhere
-      (PHYSICS.md);
+      (docs/physics.md, 'Initial states and published settings');
     - ``spnn``: our choice, since the published data's initial states are not stated: the
       same layout stretched to the set's rest lengths with gentler momenta, centre
       ``(2.2, 0, 3.3, 0, 0, 0.5, 0.5, 0, 0.01, -0.01)``, half-width 0.1 on :math:`q, p` and
@@ -101,7 +101,8 @@ class PendulumConfig:
 
     @classmethod
     def named(cls, name: str) -> "PendulumConfig":
-        """The parameter set ``"unit"`` (all ones) or ``"spnn"`` (PHYSICS.md §2)."""
+        """The parameter set ``"unit"`` (all ones) or ``"spnn"`` (docs/physics.md, 'Parameter
+        sets')."""
         if name == "unit":
             return cls()
         if name == "spnn":
