@@ -1,7 +1,8 @@
 r"""The zoo: GENERIC systems that metriplex's defaults are chosen and checked on.
 
 None of them is a reference experiment. Each is a ground-truth :class:`~metriplex.systems.System`
-(analytic :math:`E, S, L, M`, checked exactly GENERIC in ``tests/test_zoo.py``) plus a
+(analytic :math:`E, S, L, M`, checked exactly GENERIC in ``tests/test_zoo_a.py`` and
+``tests/test_zoo_b.py``) plus a
 :class:`ZooCase`: how much data a user would have, and the structure options that describe
 what such a user knows (e.g. ``--poisson canonical:2 --entropy sum:4``), nothing else.
 
