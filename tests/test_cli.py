@@ -5,6 +5,7 @@ import contextlib
 import hashlib
 import io
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -68,6 +69,13 @@ def test_run_folder_contents(oscillator_run):
         assert (run_dir / name).exists(), name
     cfg = json.loads((run_dir / "config.json").read_text())
     assert cfg["names"] == ["q", "p", "s"] and cfg["config"]["poisson"] == "canonical:1"
+    # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
+    assert not (run_dir / ".metriplex.lock").exists()
+    mask = os.umask(0)
+    os.umask(mask)
+    modes = {str(p.relative_to(run_dir)): oct(p.stat().st_mode & 0o777)
+             for p in run_dir.rglob("*") if p.is_file()}
+    assert set(modes.values()) == {oct(0o666 & ~mask)}, modes
     assert set(cfg["train_trajectories"]).isdisjoint(cfg["validation_trajectories"])
 
 

@@ -6,7 +6,8 @@ class MetriplexError(ValueError):
 
 
 class RolloutFailure(MetriplexError):
-    """An implicit step did not converge. ``partial`` holds the states computed before it."""
+    """A rollout step failed: an implicit step did not converge, or an explicit step gave a
+    non-finite state. ``partial`` holds the states computed before it."""
 
     def __init__(self, message: str, *, partial=None, trajectory: int = 0, time: float = 0.0):
         super().__init__(message)

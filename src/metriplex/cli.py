@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
+import re
 import sys
 from pathlib import Path
 
@@ -17,6 +19,23 @@ _SOLVERS = ("auto", "newton", "fixed-point")
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 3
+
+#: A value that starts with a minus sign and a digit is a number, never an option: argparse
+#: alone reads "--lr -1e-3" as "--lr" without a value (it knows only -1 and -.5 as numbers).
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                              re.IGNORECASE)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with negative numbers in any notation as values, and usage errors as one line
+    (the rule and the value, and where to look) instead of the whole usage text."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}. See `{self.prog} --help`.\n")
 
 
 def _add_structure_options(p: argparse.ArgumentParser) -> None:
@@ -97,20 +116,35 @@ def _config_from_args(args):
     return dataclasses.replace(base, **updates)
 
 
-def _check_out(path: Path, overwrite: bool) -> None:
-    if path.exists() and not overwrite:
-        raise MetriplexError(
-            f"output file {str(path)!r} exists; refusing to overwrite it. Pass --overwrite or "
-            "choose another --out."
-        )
+def _check_trajectory_out(path, overwrite: bool) -> Path:
+    from .io import check_output_file, trajectory_suffixes
+
+    return check_output_file(path, overwrite=overwrite, suffixes=trajectory_suffixes())
+
+
+def _honour_model_dtype(run) -> None:
+    """Enable x64 before any array exists when the model file holds float64 weights: every
+    command reads a model in the precision it was trained in."""
+    from .io import read_header
+
+    if read_header(run).get("dtype") == "float64":
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+
+
+def _positive_finite(value, option: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise MetriplexError(f"{option} must be a positive finite number; got {value}.")
 
 
 def cmd_simulate(args) -> None:
     from . import systems
+    from .config import check_seed
     from .io import write
 
-    out = Path(args.out)
-    _check_out(out, args.overwrite)
+    out = _check_trajectory_out(args.out, args.overwrite)
+    check_seed(args.seed)
     if args.float64:
         import jax
 
@@ -158,22 +192,31 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
 
 
 def cmd_train(args) -> None:
+    from ._lock import RunLock
+    from .config import validate
     from .io import read
-    from .runs import evaluate_run, train_run, write_json
+    from .runs import check_run_folder, evaluate_run, train_run, write_json
 
-    data = read(args.data)
-    config = _config_from_args(args)
     out = Path(args.out)
-    model, history, train, valid, seconds = train_run(
-        data, config, out, overwrite=args.overwrite, resume=args.resume,
-        progress=not args.quiet,
-    )
-    target = valid if valid is not None else train
-    metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures")
-    metrics["train_seconds"] = seconds
-    metrics["evaluated_on"] = "validation trajectories" if valid is not None else "training data"
-    metrics["stopped"] = history.stopped
-    write_json(out / "metrics.json", metrics)
+    check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
+    config = _config_from_args(args)
+    data = read(args.data)
+    validate(config, data.n)
+    # The lock covers the evaluation and metrics.json too, not only the training.
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        model, history, train, valid, seconds = train_run(
+            data, config, out, overwrite=args.overwrite, resume=args.resume,
+            progress=not args.quiet,
+        )
+        target = valid if valid is not None else train
+        metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures")
+        metrics["train_seconds"] = seconds
+        metrics["evaluated_on"] = ("validation trajectories" if valid is not None
+                                   else "training data")
+        metrics["stopped"] = history.stopped
+        write_json(out / "metrics.json", metrics)
     print(_train_summary(history, metrics, seconds, out))
     if history.stopped.startswith("interrupted"):
         print(
@@ -189,16 +232,16 @@ def cmd_rollout(args) -> None:
 
     from .data import Trajectories
     from .diagnostics import rollout_data
-    from .integrate import scheme_from_name
+    from .integrate import scheme_from_name, step_failure
     from .io import load, read, write
     from .runs import check_names
 
-    out = Path(args.out)
-    _check_out(out, args.overwrite)
+    out = _check_trajectory_out(args.out, args.overwrite)
+    scheme = scheme_from_name(_scheme(args), solver=args.solver)
+    _honour_model_dtype(args.run)
     model = load(args.run)
     data = read(args.data)
     check_names(args.run, data)
-    scheme = scheme_from_name(_scheme(args), solver=args.solver)
     result, _, lengths = rollout_data(model, data, scheme=scheme)
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
@@ -207,16 +250,19 @@ def cmd_rollout(args) -> None:
     for k, T in enumerate(lengths):
         stop = T if failed[k] < 0 or failed[k] >= T else int(failed[k])
         if stop < T:
+            what = step_failure(scheme, ts[k, stop - 1], ts[k, stop])
             print(
-                f"warning: trajectory {data.ids[k]}: the implicit step to t={ts[k, stop]:.6g} did "
-                f"not converge; writing the {stop} states computed before it.",
+                f"warning: trajectory {data.ids[k]}: {what}; writing the {stop} states computed "
+                "before it.",
                 file=sys.stderr,
             )
         if stop >= 2:
             pieces.append((ts[k, :stop], xs[k, :stop]))
     if not pieces:
-        raise MetriplexError("no trajectory could be rolled out past its first step; nothing to "
-                             "write. Try --scheme rk4 or a smaller time step.")
+        raise MetriplexError(
+            f"no trajectory could be rolled out past its first step with the {scheme.name} "
+            f"scheme (each failure is named above); nothing to write to {str(out)!r}."
+        )
     write(out, Trajectories.from_list(pieces, data.names))
     print(f"wrote {len(pieces)} predicted trajectories to {out}")
 
@@ -233,9 +279,21 @@ def _scheme(args) -> str:
 def cmd_evaluate(args) -> None:
     import json
 
-    from .io import load, read, write_json
+    from .io import check_output_file, check_output_folder, load, read, write_json
     from .runs import check_names, evaluate_run
 
+    if args.out:
+        check_output_file(args.out, overwrite=args.overwrite)
+    if args.figures:
+        check_output_folder(args.figures, "--figures")
+    _positive_finite(args.horizon, "--horizon")
+    if args.verdict_steps < 1:
+        raise MetriplexError(
+            f"--verdict-steps must be >= 1 (training steps of the black-box reference); got "
+            f"{args.verdict_steps}. Pass --no-verdict to skip the verdict."
+        )
+    _scheme(args)  # a damaged config.json is reported before any work
+    _honour_model_dtype(args.run)
     model = load(args.run)
     data = read(args.data)
     check_names(args.run, data)
@@ -254,22 +312,29 @@ def cmd_evaluate(args) -> None:
         )
         print(metrics["verdict"]["statement"], file=sys.stderr)
     if args.out:
-        out = Path(args.out)
-        _check_out(out, args.overwrite)
-        write_json(out, metrics)
+        write_json(Path(args.out), metrics)
     summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
     print(json.dumps(summary, indent=2, default=str))
 
 
 def cmd_reproduce(args) -> None:
-    from .experiments import run_experiment
+    from ._lock import RunLock
+    from .experiments import default_out, run_experiment
+    from .runs import check_run_folder
 
-    run_experiment(args.experiment, quick=args.quick, out=args.out, overwrite=args.overwrite,
-                   degeneracy=args.degeneracy, progress=not args.quiet, defaults=args.defaults)
+    out = Path(args.out) if args.out else default_out(args.experiment, quick=args.quick,
+                                                      defaults=args.defaults)
+    check_run_folder(out, overwrite=args.overwrite)
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        run_experiment(args.experiment, quick=args.quick, out=out, overwrite=args.overwrite,
+                       degeneracy=args.degeneracy, progress=not args.quiet,
+                       defaults=args.defaults)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="metriplex",
         description="Learn thermodynamically consistent (GENERIC) dynamics "
         "dx/dt = L(x) grad E(x) + M(x) grad S(x) from trajectories.",
@@ -376,8 +441,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"metriplex {args.command}: interrupted", file=sys.stderr)
         return 130
     except OSError as e:
-        print(f"metriplex {args.command}: error: {e.strerror or e}: {e.filename or ''}",
-              file=sys.stderr)
+        where = f" {str(e.filename)!r}" if e.filename else ""
+        print(f"metriplex {args.command}: error: cannot access{where}: {e.strerror or e}. Check "
+              "the path and its permissions.", file=sys.stderr)
         return EXIT_BAD_INPUT
     return code or 0
 

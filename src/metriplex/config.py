@@ -8,6 +8,7 @@ The command line and the experiment presets describe a run with a :class:`RunCon
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import jax.random as jr
@@ -135,7 +136,18 @@ def validate(config: RunConfig, n: int) -> None:
                 f"--poisson canonical:K needs an integer K (the number of position/momentum "
                 f"pairs); got {config.poisson!r}."
             ) from None
-        if K < 1 or 2 * K > n:
+        if n < 2:
+            raise MetriplexError(
+                f"--poisson canonical:{K} needs at least one position and one momentum (n >= 2 "
+                f"variables), but the data have n={n}. Use --poisson zero (no reversible part) "
+                "or give data with more variables."
+            )
+        if K < 1:
+            raise MetriplexError(
+                f"--poisson canonical:K needs K >= 1 position/momentum pairs; got K={K}. Use "
+                f"canonical:K with 1 <= K <= {n // 2} for these n={n} variables."
+            )
+        if 2 * K > n:
             raise MetriplexError(
                 f"--poisson canonical:{K} needs 2K <= n (K positions then K momenta), but the data "
                 f"have n={n} variables. Use canonical:K with 1 <= K <= {n // 2}."
@@ -160,16 +172,39 @@ def validate(config: RunConfig, n: int) -> None:
             f"--jacobi-samples must be >= 1 (pairs per batch that the Jacobi penalty sees); got "
             f"{config.jacobi_samples}. Leave it out to use the whole batch."
         )
+    check_seed(config.seed)
+    for name in FLOAT_FIELDS:
+        v = getattr(config, name)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float))
+                              or not math.isfinite(v)):
+            raise MetriplexError(
+                f"--{name.replace('_', '-')} must be a finite number; got {v!r}."
+            )
+    if config.jacobi_probes < 1:
+        raise MetriplexError(
+            f"--jacobi-probes must be >= 1 (random probes per sample of the stochastic Jacobi "
+            f"penalty); got {config.jacobi_probes}."
+        )
+    if config.checkpoint_every < 1:
+        raise MetriplexError(
+            f"--checkpoint-every must be >= 1 (validations between checkpoints); got "
+            f"{config.checkpoint_every}."
+        )
     if config.patience is not None and config.patience < 1:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise MetriplexError(f"--max-minutes must be > 0; got {config.max_minutes}.")
-    for name in ("width", "depth", "steps", "batch_size", "eval_every"):
+    what = {"width": "units per hidden layer", "depth": "hidden layers",
+            "steps": "the most optimiser steps", "batch_size": "pairs per optimiser step",
+            "eval_every": "optimiser steps between validations"}
+    for name, meaning in what.items():
         v = getattr(config, name)
-        if v < (0 if name == "steps" else 1):
-            raise MetriplexError(f"--{name.replace('_', '-')} must be positive; got {v}.")
+        if v < 1:
+            raise MetriplexError(
+                f"--{name.replace('_', '-')} must be >= 1 ({meaning}); got {v}."
+            )
     if not config.lr > 0:
         raise MetriplexError(f"--lr must be > 0; got {config.lr}.")
     if not config.weight_decay >= 0:
@@ -179,6 +214,24 @@ def validate(config: RunConfig, n: int) -> None:
     for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi"):
         if getattr(config, name) < 0:
             raise MetriplexError(f"loss weight {name} must be >= 0; got {getattr(config, name)}.")
+
+
+#: The real-valued settings; each must be a finite number (``max_minutes`` may be left out).
+FLOAT_FIELDS = ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "lr", "weight_decay",
+                "validation", "max_minutes")
+
+#: Seeds are the non-negative integers below this bound (what NumPy and JAX both accept).
+SEED_BOUND = 2**32
+
+
+def check_seed(seed, option: str = "--seed") -> int:
+    """A PRNG seed: an integer in ``[0, 2**32)``."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or not 0 <= seed < SEED_BOUND:
+        raise MetriplexError(
+            f"{option} must be an integer from 0 to {SEED_BOUND - 1}; got {seed!r}."
+        )
+    return int(seed)
 
 
 FEATURE_BLOCKS = ("energy", "entropy", "friction")

@@ -473,6 +473,27 @@ def _rollout_one(model, scheme, x0, ts):
 _rollout_batch = eqx.filter_jit(_rollout)
 
 
+def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") -> str:
+    """What went wrong in a failed step from ``t0`` to ``t1`` (``where``, e.g. " of trajectory
+    3", follows the times), and what to try, in the words of ``scheme``: an implicit step's
+    solve did not converge; an explicit step (RK4) has nothing to converge, its new state was
+    not finite."""
+    name = getattr(scheme, "name", "") or type(scheme).__name__
+    span = f"from t={t0:.6g} to t={t1:.6g}{where}"
+    if isinstance(scheme, _Implicit):
+        return (
+            f"the implicit {name} step {span} did not converge (solver {scheme.solver!r}). Try "
+            "the Newton solver (--solver newton), a smaller time step, or RK4 (--scheme rk4) "
+            "to see whether the model itself blows up"
+        )
+    return (
+        f"the explicit {name} step {span} gave a non-finite state: the model's vector field "
+        "overflowed or is NaN there (the model blows up along this trajectory). A smaller time "
+        "step helps only if the step itself was unstable; otherwise the model needs more or "
+        "wider training data"
+    )
+
+
 def _check_inputs(x0, ts, n):
     if x0.ndim not in (1, 2):
         raise MetriplexError(
@@ -558,10 +579,10 @@ def simulate(
         k = int(failed[b])
         ts_b = np.asarray(out.ts).reshape(-1, np.asarray(out.ts).shape[-1])[b]
         xs_b = np.asarray(out.xs).reshape(-1, *np.asarray(out.xs).shape[-2:])[b]
+        what = step_failure(CrankNicolson() if scheme is None else scheme,
+                            float(ts_b[k - 1]), float(ts_b[k]), f" of trajectory {b}")
         raise RolloutFailure(
-            f"the implicit step from t={ts_b[k - 1]:.6g} to t={ts_b[k]:.6g} of trajectory {b} "
-            f"did not converge (step {k}); {k} states were computed. Try a smaller time step, "
-            "`scheme=RK4()` to inspect, or check the model for blow-up.",
+            f"step {k}: {what}. The {k} states computed before it are in .partial.",
             partial=xs_b[:k],
             trajectory=b,
             time=float(ts_b[k]),

@@ -14,7 +14,7 @@ import csv
 import io as _io
 import json
 import os
-import tempfile
+import secrets
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -37,7 +37,7 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[Any]:
     """Open a temporary file beside ``path``; rename it over ``path`` only on success."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = _create_temporary(path)
     try:
         with os.fdopen(fd, mode) as f:
             yield f
@@ -48,6 +48,20 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb") -> Iterator[Any]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def _create_temporary(path: Path) -> tuple[int, str]:
+    """A new file beside ``path`` created with mode 0666, so that the user's umask (and a
+    folder's default ACL) applies as to any file they write: ``tempfile.mkstemp`` would give
+    0600, and the renamed result would be unreadable to the user's group."""
+    for _ in range(100):
+        tmp = str(path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return os.open(tmp, os.O_RDWR | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0),
+                           0o666), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(f"cannot create a temporary file beside {str(path)!r}")
 
 
 def write_json(path, obj) -> None:
@@ -149,17 +163,84 @@ def write(path: str | os.PathLike, data: Trajectories) -> None:
                 for i, t, x in zip(data.trajectory.tolist(), data.t.tolist(), data.x.tolist())
             )
         return
-    writers = {}
-    with contextlib.suppress(ImportError):
-        from . import _formats
-
-        writers = _formats.WRITERS
+    writers = _writers()
     if suffix not in writers:
         raise MetriplexError(
             f"cannot write {str(path)!r}: unknown extension {suffix!r}. Trajectories are written "
             f"as {', '.join(sorted({'.npz', '.csv', *writers}))}."
         )
     writers[suffix](path, data)
+
+
+def _writers() -> dict:
+    with contextlib.suppress(ImportError):
+        from . import _formats
+
+        return dict(_formats.WRITERS)
+    return {}
+
+
+def trajectory_suffixes() -> tuple[str, ...]:
+    """The file extensions :func:`write` writes trajectories as."""
+    return tuple(sorted({".npz", ".csv", *_writers()}))
+
+
+# -- outputs, checked before any work --------------------------------------------------------
+
+def _check_writable_folder(folder: Path, target: Path, option: str) -> None:
+    """``folder`` (which may not exist yet) can be created and written in."""
+    existing = folder
+    while not existing.exists() and existing.parent != existing:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise MetriplexError(
+            f"cannot write {option} {str(target)!r}: {str(existing)!r} is a file, not a folder. "
+            f"Choose another {option}."
+        )
+    kw = {"effective_ids": True} if os.access in os.supports_effective_ids else {}
+    if not os.access(existing, os.W_OK | os.X_OK, **kw):
+        raise MetriplexError(
+            f"cannot write {option} {str(target)!r}: the folder {str(existing)!r} is not writable "
+            f"(permission denied or a read-only file system). Choose another {option}, or make "
+            "that folder writable."
+        )
+
+
+def check_output_file(path: str | os.PathLike, *, overwrite: bool = False, option: str = "--out",
+                      suffixes: tuple[str, ...] | None = None) -> Path:
+    """Fail now, before any work, if the file ``path`` could not be written at the end: it is a
+    folder, exists (without ``overwrite``), has an extension not in ``suffixes``, or its folder
+    is not writable."""
+    path = Path(path)
+    if path.is_dir():
+        raise MetriplexError(
+            f"{option} {str(path)!r} is a folder; {option} takes a file name (such as "
+            f"{str(path / ('out' + (suffixes[0] if suffixes else '.json')))!r})."
+        )
+    if path.exists() and not overwrite:
+        raise MetriplexError(
+            f"output file {str(path)!r} exists; refusing to overwrite it. Pass --overwrite or "
+            f"choose another {option}."
+        )
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        raise MetriplexError(
+            f"cannot write {str(path)!r}: unknown extension {path.suffix.lower() or '(none)'!r}. "
+            f"Trajectories are written as {', '.join(suffixes)}."
+        )
+    _check_writable_folder(path.parent, path, option)
+    return path
+
+
+def check_output_folder(path: str | os.PathLike, option: str = "--out") -> Path:
+    """Fail now, before any work, if the folder ``path`` could not be created or written in."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise MetriplexError(
+            f"{option} {str(path)!r} is a file, not a folder; {option} names a folder to write "
+            "into. Choose another path."
+        )
+    _check_writable_folder(path, path, option)
+    return path
 
 
 def _readers():
@@ -409,6 +490,11 @@ def _header(f, path) -> dict[str, Any]:
         raise MetriplexError(
             f"the header of model file {str(path)!r} is corrupted (not valid JSON)."
         ) from None
+    if not isinstance(header, dict):
+        raise MetriplexError(
+            f"the header of model file {str(path)!r} is corrupted: a JSON object is needed, got "
+            f"{type(header).__name__}. Re-save or re-train the model."
+        )
     version = header.get("format_version")
     if version != FORMAT_VERSION:
         raise MetriplexError(
@@ -416,7 +502,38 @@ def _header(f, path) -> dict[str, Any]:
             f"version {FORMAT_VERSION}. Re-train or use the metriplex version that wrote it "
             f"({header.get('library_version', 'unknown')})."
         )
+    _check_header(header, path)
     return header
+
+
+#: Floating-point types a model file may hold.
+MODEL_DTYPES = ("float32", "float64")
+
+
+def _check_header(header: dict[str, Any], path) -> None:
+    """The fields that :func:`load` needs, each with the type it needs."""
+
+    def bad(field: str, rule: str) -> MetriplexError:
+        got = "it is missing" if field not in header else f"got {header[field]!r}"
+        return MetriplexError(
+            f"the header of model file {str(path)!r} is damaged: field {field!r} must be "
+            f"{rule}; {got}. Re-save the model with metriplex.save, or re-train it."
+        )
+
+    n = header.get("n")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise bad("n", "the number of state variables, a positive integer")
+    names = header.get("names", [])
+    if not isinstance(names, list) or not all(isinstance(v, str) for v in names) or (
+        names and len(names) != n
+    ):
+        raise bad("names", f"a list of {n} variable names (or empty)")
+    if header.get("dtype", "float32") not in MODEL_DTYPES:
+        raise bad("dtype", " or ".join(repr(d) for d in MODEL_DTYPES))
+    spec = header.get("model")
+    blocks = ("energy", "entropy", "poisson", "friction")
+    if not isinstance(spec, dict) or not all(isinstance(spec.get(b), dict) for b in blocks):
+        raise bad("model", "the architecture: an object with the blocks " + ", ".join(blocks))
 
 
 def load(path: str | os.PathLike) -> GenericModel:
@@ -432,15 +549,51 @@ def load(path: str | os.PathLike) -> GenericModel:
         dtype = jnp.dtype(header.get("dtype", "float32"))
         if dtype == jnp.float64 and not jax.config.jax_enable_x64:
             raise MetriplexError(
-                f"model file {str(path)!r} holds float64 weights; enable them first with "
-                "`jax.config.update('jax_enable_x64', True)`."
+                f"model file {str(path)!r} holds float64 weights, which JAX reads only with "
+                "x64 enabled: call `jax.config.update('jax_enable_x64', True)` before creating "
+                "any array (the metriplex command line does this itself)."
             )
-        like = GenericModel.from_spec(header["model"], header["n"], key=jr.key(0))
-        like = with_dtype(like, dtype)
         try:
-            return eqx.tree_deserialise_leaves(f, like)
+            # Shapes and dtypes only: building the networks' random initial weights for real
+            # costs seconds of small compilations, and the file's weights replace them anyway.
+            like = eqx.filter_eval_shape(
+                lambda: with_dtype(
+                    GenericModel.from_spec(header["model"], header["n"], key=jr.key(0)), dtype)
+            )
+        except MetriplexError as e:
+            raise MetriplexError(f"model file {str(path)!r}: {e}") from None
+        except (KeyError, TypeError, ValueError) as e:
+            raise MetriplexError(
+                f"the header of model file {str(path)!r} describes no model this metriplex can "
+                f"build ({type(e).__name__}: {e}). Re-save the model with metriplex.save, or "
+                "re-train it."
+            ) from None
+        try:
+            model = eqx.tree_deserialise_leaves(f, like)
         except Exception as e:
             raise MetriplexError(
                 f"model file {str(path)!r} is truncated or corrupted: its weights do not match "
                 f"its header ({type(e).__name__}). Re-save or re-train the model."
             ) from None
+        extra = len(f.read())
+        if extra:
+            raise MetriplexError(
+                f"model file {str(path)!r} is corrupted: {extra} bytes follow the weights that "
+                "its header describes. Re-save or re-train the model."
+            )
+    _check_finite_weights(model, path)
+    return model
+
+
+def _check_finite_weights(model: GenericModel, path) -> None:
+    """A model with a NaN or infinite weight gives NaN everywhere: refuse it at once."""
+    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    total = sum(int(np.size(a)) for a in leaves)
+    bad = sum(int(np.size(a) - np.count_nonzero(np.isfinite(np.asarray(a)))) for a in leaves)
+    if bad:
+        raise MetriplexError(
+            f"model file {str(path)!r} holds {bad} non-finite weights (NaN or infinite) of "
+            f"{total}; such a model gives NaN everywhere and cannot be evaluated or rolled out. "
+            "It was saved from a training that diverged, or the file is damaged: re-train (for "
+            "example with a lower --lr)."
+        )

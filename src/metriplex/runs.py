@@ -3,11 +3,14 @@
 A run folder holds ``model.mpx`` (the best model), ``config.json`` (the resolved configuration,
 with the data's variable names and the validation split), ``history.json``, ``checkpoint.ckpt``
 (to resume), ``metrics.json`` and ``figures/`` (each figure as PNG, PDF and the raw NPZ).
+While a training writes it, the folder also holds ``.metriplex.lock``: one training at a time
+owns a run folder (see ``_lock``).
 """
 
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -18,28 +21,38 @@ import numpy as np
 
 from . import plots
 from ._errors import MetriplexError, TrainingDiverged
+from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._model import with_dtype
 from .config import RunConfig, build_loss, build_model, units_for, validate
 from .data import Trajectories, state_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
-from .io import save, write_json
+from .io import check_output_folder, save, write_json
 from .train import Plateau, fit
 
 
-def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
+def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool = False) -> None:
+    """Whether a training may write the run folder ``out``; checked before any work, and
+    again once the folder is locked. Creates nothing."""
+    out = Path(out)
+    check_output_folder(out)
+    check_not_in_use(out)
     if resume:
-        if not (out / "checkpoint.ckpt").exists():
+        if not (out / "checkpoint.ckpt").is_file():
             raise MetriplexError(
                 f"cannot resume: {str(out)!r} holds no checkpoint.ckpt. Start a new run without "
                 "--resume."
             )
         return
-    if out.exists() and any(out.iterdir()) and not overwrite:
+    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not overwrite:
         raise MetriplexError(
             f"output folder {str(out)!r} exists and is not empty; refusing to overwrite it. Pass "
             "--overwrite, choose another --out, or --resume an interrupted run."
         )
+
+
+def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
+    check_run_folder(out, overwrite=overwrite, resume=resume)
     out.mkdir(parents=True, exist_ok=True)
 
 
@@ -55,12 +68,27 @@ def train_run(
     """Train a model described by ``config`` on ``data`` and fill the run folder ``out``."""
     out = Path(out)
     validate(config, data.n)
+    check_output_folder(out)
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        return _train_run(data, config, out, overwrite=overwrite, resume=resume,
+                          progress=progress)
+
+
+def _train_run(data, config, out, *, overwrite, resume, progress):
     if config.float64:
         jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64 if config.float64 else jnp.float32
     _prepare_dir(out, overwrite=overwrite, resume=resume)
     if resume:
-        saved = RunConfig.from_json(json.loads((out / "config.json").read_text())["config"])
+        stored = run_config(out).get("config")
+        if stored is None:
+            raise MetriplexError(
+                f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
+                "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
+            )
+        saved = RunConfig.from_json(stored)
         if saved != config:
             diff = {k: (getattr(saved, k), getattr(config, k)) for k in saved.to_json()
                     if getattr(saved, k) != getattr(config, k)}
@@ -129,9 +157,21 @@ def train_run(
 
 def run_config(run_dir: str | Path) -> dict:
     path = Path(run_dir) / "config.json"
-    if not path.exists():
+    if not path.is_file():
         return {}
-    return json.loads(path.read_text())
+    try:
+        obj = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as e:
+        raise MetriplexError(
+            f"{str(path)!r} is not valid JSON ({e}); the run folder is damaged. Delete that "
+            "file (the scheme then defaults to cn; pass --scheme), or re-train."
+        ) from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("config", {}), dict):
+        raise MetriplexError(
+            f"{str(path)!r} does not hold a run configuration (an object with a `config` "
+            "object); the run folder is damaged. Delete that file, or re-train."
+        )
+    return obj
 
 
 def check_names(run_dir, data: Trajectories) -> None:

@@ -126,6 +126,11 @@ def affine_fit(true_vals: np.ndarray, learned: np.ndarray) -> dict[str, float]:
     }
 
 
+def default_out(name: str, *, quick: bool = False, defaults: bool = False) -> Path:
+    """The run folder of ``reproduce`` without ``--out``: ``runs/NAME[-defaults][-quick]``."""
+    return Path("runs") / (name + ("-defaults" if defaults else "") + ("-quick" if quick else ""))
+
+
 def run_experiment(
     name: str,
     *,
@@ -152,8 +157,7 @@ def run_experiment(
     if degeneracy not in ("soft", "exact"):
         raise MetriplexError(f"--degeneracy must be soft or exact; got {degeneracy!r}.")
     size = size if size is not None else exp.quick if quick else exp.full
-    suffix = ("-defaults" if defaults else "") + ("-quick" if quick else "")
-    out = Path(out) if out is not None else Path("runs") / (name + suffix)
+    out = Path(out) if out is not None else default_out(name, quick=quick, defaults=defaults)
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     system = get_system(exp.system, **exp.system_params)
     t0 = time.perf_counter()
