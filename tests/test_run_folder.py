@@ -207,3 +207,40 @@ def test_a_float64_model_is_read_as_float64_without_x64_in_the_environment(tmp_p
     # float32 would differ at ~1e-7; float64 agrees to rounding
     np.testing.assert_allclose(pred.x, np.asarray(here.xs).reshape(-1, 3), rtol=1e-12,
                                atol=1e-13)
+
+
+@posix_only
+@pytest.mark.parametrize("held", [False, True])
+def test_another_users_lock_file(tmp_path, monkeypatch, held):
+    """A lock file this user may not write (another user's, in a shared folder): refused while
+    its owner holds it, removed and replaced when stale."""
+    import fcntl
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    lock = folder / LOCK_NAME
+    lock.write_text(json.dumps({"pid": 4242, "host": "elsewhere"}))
+    holder = os.open(lock, os.O_RDONLY)
+    if held:
+        fcntl.flock(holder, fcntl.LOCK_EX)
+    real_open = os.open
+
+    def open_(path, flags, *args, **kw):
+        if str(path) == str(lock) and flags & os.O_ACCMODE == os.O_RDWR \
+                and not flags & os.O_CREAT:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kw)
+
+    monkeypatch.setattr(_lock.os, "open", open_)
+    try:
+        if held:
+            with pytest.raises(RunFolderInUse, match=r"process 4242 on host elsewhere"):
+                RunLock(folder).acquire()
+            assert json.loads(lock.read_text())["pid"] == 4242
+        else:
+            with RunLock(folder) as taken:
+                assert "from process 4242 on host elsewhere" in taken.note
+                assert json.loads(lock.read_text())["pid"] == os.getpid()
+            assert not lock.exists()
+    finally:
+        os.close(holder)

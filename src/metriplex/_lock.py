@@ -122,7 +122,7 @@ def check_not_in_use(folder: str | os.PathLike) -> None:
         if (os.path.realpath(folder), threading.get_ident()) in _held:
             return
     try:
-        fd = os.open(folder / LOCK_NAME, os.O_RDWR)
+        fd = os.open(folder / LOCK_NAME, os.O_RDONLY)  # an OS lock needs no write access
     except OSError:  # no lock file (or none we could open: acquire will say why)
         return
     try:
@@ -170,6 +170,7 @@ class RunLock:
             if key in _held:  # this thread holds it already: nest (release is then a no-op)
                 self._key, self._nested = key, True
                 return self
+        stale: dict = {}  # the owner of a stale lock file removed below
         for _ in range(100):
             created = True
             try:
@@ -180,9 +181,12 @@ class RunLock:
                     fd = os.open(self.path, os.O_RDWR)
                 except FileNotFoundError:  # released meanwhile: try again
                     continue
+                except PermissionError:  # another user's lock file (a shared folder)
+                    stale = self._remove_if_stale()
+                    continue
             try:
                 taken = _os_lock(fd)
-                previous = {} if created else _read_owner(fd)
+                previous = stale if created else _read_owner(fd)
                 if taken is None:  # no OS locks here: judge the owner by its process id
                     taken = created or self._stale_on_this_host(previous)
                 if not taken:
@@ -217,6 +221,27 @@ class RunLock:
             f"could not lock run folder {str(self.folder)!r}: other processes keep creating and "
             "removing its lock. Run one training at a time in it."
         )
+
+    def _remove_if_stale(self) -> dict:
+        """For a lock file we may not write: raise if its owner holds it, else remove it (the
+        folder is ours to write) and return its owner, for the note."""
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except FileNotFoundError:
+            return {}
+        try:
+            taken = _os_lock(fd)
+            owner = _read_owner(fd)
+            if taken is None:
+                taken = self._stale_on_this_host(owner)
+            if not taken:
+                raise _in_use(self.folder, owner)
+            with contextlib.suppress(FileNotFoundError):
+                if os.path.samestat(os.fstat(fd), os.stat(self.path)):
+                    os.unlink(self.path)  # while holding it: no other taker can be inside
+        finally:
+            os.close(fd)
+        return owner
 
     def _stale_on_this_host(self, owner: dict) -> bool:
         pid = owner.get("pid")
