@@ -6,19 +6,25 @@ One set of functions judges ground-truth systems and learned models alike:
   rolled out from each trajectory's first state on its own time grid;
 - the energy's relative drift and the entropy change per step along the model's own rollout;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
-  factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``.
+  factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
+- the sign of the entropy production :math:`\dot S = \nabla S\cdot\dot x` at the states along
+  the model's rollouts.
+
+No quantity that could not be computed is reported as a number: it is ``None`` (``null`` in
+JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._model import GenericModel, float_dtype
-from .data import Trajectories
+from .data import Trajectories, state_scale
 from .integrate import AbstractScheme, CrankNicolson, solve
 
 _TINY = 1e-300
@@ -37,56 +43,116 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
 
 def _potential_along(model, fn, xs):
     xs = jnp.asarray(xs, float_dtype(model))
-    return np.asarray(jax.vmap(jax.vmap(fn))(xs), dtype=np.float64)
+    return np.asarray(_map2(fn, xs), dtype=np.float64)
 
 
-def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256) -> dict:
-    """Degeneracy, Jacobi and PSD diagnostics at states ``x`` (subsampled to ``max_states``)."""
+@eqx.filter_jit
+def _map2(fn, xs):
+    return jax.vmap(jax.vmap(fn))(xs)
+
+
+def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256,
+                        scale: np.ndarray | None = None) -> dict:
+    r"""Degeneracy, Jacobi and PSD diagnostics at states ``x`` (subsampled to ``max_states``).
+
+    The relative residuals are :math:`|L\nabla S|/(|L|_F|\nabla S|)` and
+    :math:`|M\nabla E|/(|M|_F|\nabla E|)` (0 exact, about 0.7 and 1 at most: no degeneracy at
+    all), averaged over the states where their factors are not zero, and the Jacobi residual
+    :math:`|J|/(3|T|)` (0 for a Poisson bivector, 1 when its three cyclic terms do not cancel
+    at all). They do not depend on the units of time, of :math:`E` or of :math:`S`. With
+    ``scale`` (the per-variable data scale :math:`d`) they are measured in standardised
+    coordinates :math:`\tilde x = x/d` (:math:`\tilde L = D^{-1}LD^{-1}`,
+    :math:`\widetilde{\nabla S} = D\nabla S`), so they do not depend on the units of the state
+    either; the verdict uses these. A relative residual whose factors vanish at every state
+    (e.g. :math:`S = 0`: :math:`L\nabla S = 0` holds trivially) is ``None``, and
+    ``null_reasons`` says why.
+    """
     x = np.asarray(x)
     if len(x) > max_states:
         x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
+    n = x.shape[1]
+    d = np.ones(n) if scale is None else np.asarray(scale, dtype=np.float64)
     xj = jnp.asarray(x, float_dtype(model))
-    terms = jax.vmap(model.terms)(xj)
+    terms = _terms_at(model, xj)
     f64 = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
     L, M = f64(terms.poisson), f64(terms.friction)
     gE, gS = f64(terms.grad_energy), f64(terms.grad_entropy)
     LgS = np.einsum("bij,bj->bi", L, gS)
     MgE = np.einsum("bij,bj->bi", M, gE)
-    nL = np.linalg.norm(L, axis=(1, 2))
-    nM = np.linalg.norm(M, axis=(1, 2))
-    nS = np.linalg.norm(gS, axis=1)
-    nE = np.linalg.norm(gE, axis=1)
-    rel_LS = np.linalg.norm(LgS, axis=1) / np.maximum(nL * nS, _TINY)
-    rel_MS = np.linalg.norm(MgE, axis=1) / np.maximum(nM * nE, _TINY)
-    J = f64(jax.vmap(model.jacobi_tensor)(xj[: min(len(x), 64)]))
+    # Standardised coordinates (the identity without `scale`): L~ = D^-1 L D^-1, grad~ = D grad.
+    dd = d[:, None] * d[None, :]
+    Ls, Ms = L / dd[None], M / dd[None]
+    nL = np.linalg.norm(Ls, axis=(1, 2))
+    nM = np.linalg.norm(Ms, axis=(1, 2))
+    nS = np.linalg.norm(gS * d[None, :], axis=1)
+    nE = np.linalg.norm(gE * d[None, :], axis=1)
+    null_reasons: dict[str, str] = {}
+
+    def relative(num, den, key, why):
+        ok = den > 0
+        if not np.any(ok):
+            null_reasons[key] = why
+            return None
+        return float(np.mean(num[ok] / den[ok]))
+
+    rel_LS = relative(np.linalg.norm(LgS / d[None, :], axis=1), nL * nS,
+                      "degeneracy_L_gradS_relative",
+                      "L or grad S is zero at every state: L grad S = 0 holds trivially")
+    rel_MS = relative(np.linalg.norm(MgE / d[None, :], axis=1), nM * nE,
+                      "degeneracy_M_gradE_relative",
+                      "M or grad E is zero at every state: M grad E = 0 holds trivially")
+    J, T = _jacobi_parts(model, xj[: min(len(x), 64)])
+    J, T = f64(J), f64(T)
+    jac_abs = np.sqrt(np.sum(J**2, axis=(1, 2, 3)))
+    ddd = d[:, None, None] * d[None, :, None] * d[None, None, :]
     # Each of the three cyclic terms of J has the Frobenius norm of T = (dL) L; measure J
     # against their sum, so 1 means "no cancellation at all" and 0 an exact Poisson bracket.
-    jac_abs = np.sqrt(np.sum(J**2, axis=(1, 2, 3)))
-    jac_scale = f64(jax.vmap(lambda xi: _jacobi_scale(model, xi))(xj[: min(len(x), 64)]))
-    eig = np.linalg.eigvalsh(0.5 * (M + np.swapaxes(M, 1, 2)))
-    asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL, _TINY)
-    return {
+    jac_rel = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
+                       3.0 * np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
+                       "jacobi_residual_relative",
+                       "(dL) L is zero at every state (L is constant or zero): the Jacobi "
+                       "identity holds exactly")
+    eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
+    nL_raw = np.linalg.norm(L, axis=(1, 2))
+    asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL_raw, _TINY)
+    out = {
         "degeneracy_L_gradS": float(np.mean(np.linalg.norm(LgS, axis=1))),
         "degeneracy_M_gradE": float(np.mean(np.linalg.norm(MgE, axis=1))),
-        "degeneracy_L_gradS_relative": float(np.mean(rel_LS)) if np.any(nL * nS > 0) else 0.0,
-        "degeneracy_M_gradE_relative": float(np.mean(rel_MS)) if np.any(nM * nE > 0) else 0.0,
+        "degeneracy_L_gradS_relative": rel_LS,
+        "degeneracy_M_gradE_relative": rel_MS,
         "jacobi_residual": float(np.mean(jac_abs)),
-        "jacobi_residual_relative": float(np.mean(jac_abs / np.maximum(jac_scale, _TINY)))
-        if np.any(jac_scale > 0)
-        else 0.0,
+        "jacobi_residual_relative": jac_rel,
         "poisson_antisymmetry_relative": float(np.max(asym)),
         "friction_min_eigenvalue": float(np.min(eig)),
         "friction_max_eigenvalue": float(np.max(eig)),
     }
+    out["null_reasons"] = null_reasons
+    return out
 
 
-def _jacobi_scale(model: GenericModel, x):
+@eqx.filter_jit
+def _terms_at(model, xs):
+    return jax.vmap(model.terms)(xs)
+
+
+@eqx.filter_jit
+def _field_and_entropy_gradient(model, xs):
+    return jax.vmap(model.vector_field)(xs), jax.vmap(jax.grad(model.entropy))(xs)
+
+
+@eqx.filter_jit
+def _jacobi_parts(model: GenericModel, xs):
+    """``(J, T)`` at each state of ``xs``: the Jacobi tensor and ``T = (dL) L``, whose three
+    index permutations sum to ``J`` (see :meth:`GenericModel.jacobi_tensor`)."""
     from ._model import _value_and_jacfwd
 
-    L, dL = _value_and_jacfwd(model.poisson_matrix, x)
-    n = x.shape[0]
-    T = dL.reshape(n * n, n) @ L
-    return 3.0 * jnp.sqrt(jnp.sum(T**2))
+    def one(x):
+        L, dL = _value_and_jacfwd(model.poisson_matrix, x)
+        n = x.shape[0]
+        T = (dL.reshape(n * n, n) @ L).reshape(n, n, n)
+        return T + jnp.transpose(T, (1, 2, 0)) + jnp.transpose(T, (2, 0, 1)), T
+
+    return jax.vmap(one)(xs)
 
 
 def evaluate(
@@ -127,14 +193,16 @@ def evaluate(
         per_var_num += np.sum((p - o) ** 2, axis=0)
         per_var_den += np.sum(o**2, axis=0)
     completed = any(np.isfinite(e) for e in per_traj)
+    n_failed = int(np.sum(failed >= 0))
     E = _potential_along(model, model.energy, np.nan_to_num(pred))
     S = _potential_along(model, model.entropy, np.nan_to_num(pred))
-    drifts, drifts_gauge, dS_min, neg_frac = [], [], [], []
+    drifts, drifts_gauge, dS_min, neg_frac, along = [], [], [], [], []
     E_data = _potential_along(model, model.energy, xs)
     spread = float(np.ptp(np.concatenate([E_data[k, :T] for k, T in enumerate(lengths)])))
     for k, T in enumerate(lengths):
         if failed[k] >= 0:
-            T = int(failed[k])
+            T = min(int(failed[k]), int(T))
+        along.append(pred[k, :T])
         e, s = E[k, :T], S[k, :T]
         if T < 2:
             continue
@@ -144,44 +212,107 @@ def evaluate(
         ds = np.diff(s)
         dS_min.append(float(ds.min()))
         neg_frac.append(float(np.mean(ds < -1e-12 * max(1.0, float(np.abs(s).max())))))
+    null_reasons: dict[str, str] = {}
+    failures = f"{n_failed} of {len(lengths)} rollouts failed"
+
+    def known(value, key, why):
+        if value is None or not np.isfinite(value):
+            null_reasons[key] = why
+            return None if value is None else float(value)
+        return float(value)
+
+    no_steps = f"no rollout ran two steps ({failures})"
     report: dict[str, Any] = {
         "trajectories": int(len(lengths)),
         "variables": list(data.names),
         "scheme": scheme.name,
+        # A failed rollout's error is inf here and null in a JSON file.
         "rollout_error": per_traj,
-        "rollout_error_mean": float(np.mean(per_traj)),
+        "rollout_error_mean": known(float(np.mean(per_traj)), "rollout_error_mean", failures),
         # Over the completed rollouts only; null (never 0.0) when every rollout failed.
         "rollout_error_per_variable": {
             name: float(np.sqrt(a / max(b, _TINY))) if completed else None
             for name, a, b in zip(data.names, per_var_num, per_var_den)
         },
-        "rollout_failures": int(np.sum(failed >= 0)),
-        "rollout_error_mean_completed": (
-            float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None),
-        "energy_relative_drift": float(np.max(drifts)) if drifts else 0.0,
-        "energy_drift_over_data_spread": float(np.max(drifts_gauge)) if drifts_gauge else 0.0,
-        "entropy_min_step": float(np.min(dS_min)) if dS_min else 0.0,
-        "entropy_negative_step_fraction": float(np.mean(neg_frac)) if neg_frac else 0.0,
+        "rollout_failures": n_failed,
+        "rollout_error_mean_completed": known(
+            float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None,
+            "rollout_error_mean_completed", f"no rollout completed ({failures})"),
+        "energy_relative_drift": known(float(np.max(drifts)) if drifts else None,
+                                       "energy_relative_drift", no_steps),
+        "energy_drift_over_data_spread": known(
+            float(np.max(drifts_gauge)) if drifts_gauge else None,
+            "energy_drift_over_data_spread", no_steps),
+        "entropy_min_step": known(float(np.min(dS_min)) if dS_min else None,
+                                  "entropy_min_step", no_steps),
+        "entropy_negative_step_fraction": known(float(np.mean(neg_frac)) if neg_frac else None,
+                                                "entropy_negative_step_fraction", no_steps),
+        # At the states of the rollouts up to any failure; null when none ran two steps.
+        "entropy_production_negative_fraction": known(
+            entropy_production_negative_fraction(model, np.concatenate(along),
+                                                 state_scale(data.x)) if drifts else None,
+            "entropy_production_negative_fraction", no_steps),
     }
+    if not completed:
+        null_reasons["rollout_error_per_variable"] = f"no rollout completed ({failures})"
     if horizon is not None:
         report["horizon"] = float(horizon)
         report["rollout_error_to_horizon"] = per_traj_h
-        report["rollout_error_to_horizon_mean"] = float(np.mean(per_traj_h))
-    report.update(structure_residuals(model, data.x))
+        report["rollout_error_to_horizon_mean"] = known(
+            float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
+            "a rollout failed before the horizon")
+    structure = structure_residuals(model, data.x)
+    null_reasons.update(structure.pop("null_reasons"))
+    report.update(structure)
+    report["null_reasons"] = null_reasons
     return report
+
+
+#: A state "decreases the entropy" when dS/dt < -PRODUCTION_TOLERANCE * |D grad S| |D^-1 dx/dt|:
+#: more than 1% of the fastest change that the state's speed allows, so rounding at states
+#: where the production vanishes (equilibria, turning points) does not count.
+PRODUCTION_TOLERANCE = 1e-2
+
+
+def entropy_production_negative_fraction(model: GenericModel, states: np.ndarray,
+                                         scale: np.ndarray, *, max_states: int = 2048) -> float:
+    r"""The fraction of ``states`` at which the model's own flow decreases its entropy.
+
+    :math:`\dot S = \nabla S\cdot f(x)` with :math:`f = L\nabla E + M\nabla S` is
+    :math:`\nabla S\cdot M\nabla S \ge 0` for a GENERIC model (:math:`L\nabla S = 0`,
+    :math:`M` PSD). A state counts when :math:`\dot S < -` :data:`PRODUCTION_TOLERANCE`
+    :math:`|D\nabla S|\,|D^{-1}f|` (``D`` = diag(``scale``)), a measure that does not
+    depend on the units of time, state or :math:`S`. ``states`` are the model's own rollout
+    (up to any failure), subsampled evenly to ``max_states``; 0.0 for a model whose entropy
+    is constant.
+    """
+    x = np.asarray(states, dtype=np.float64)
+    x = x[np.all(np.isfinite(x), axis=1)]
+    if len(x) == 0:
+        return 0.0
+    if len(x) > max_states:
+        x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
+    f, gS = _field_and_entropy_gradient(model, jnp.asarray(x, float_dtype(model)))
+    f, gS = np.asarray(f, dtype=np.float64), np.asarray(gS, dtype=np.float64)
+    d = np.asarray(scale, dtype=np.float64)
+    rate = np.sum(gS * f, axis=1)
+    size = np.linalg.norm(gS * d[None, :], axis=1) * np.linalg.norm(f / d[None, :], axis=1)
+    return float(np.mean(rate < -PRODUCTION_TOLERANCE * size))
 
 
 def _relative_error(pred: np.ndarray, obs: np.ndarray) -> float:
     """``|pred - obs| / |obs|`` over a whole trajectory; inf if any predicted state is missing."""
     if not np.all(np.isfinite(pred)):
         return float("inf")
-    return float(np.linalg.norm(pred - obs) / max(np.linalg.norm(obs), _TINY))
+    with np.errstate(over="ignore"):  # a rollout that blew up to 1e200: its error is inf
+        return float(np.linalg.norm(pred - obs) / max(np.linalg.norm(obs), _TINY))
 
 
 def error_over_time(pred: np.ndarray, obs: np.ndarray) -> np.ndarray:
     """Relative error ``|pred(t) - obs(t)| / rms|obs|`` at each time (one trajectory)."""
     scale = max(float(np.sqrt(np.mean(np.sum(obs**2, axis=-1)))), _TINY)
-    return np.linalg.norm(pred - obs, axis=-1) / scale
+    with np.errstate(over="ignore", invalid="ignore"):  # blown-up states: inf; failed: NaN
+        return np.linalg.norm(pred - obs, axis=-1) / scale
 
 
 def time_to_error(ts: np.ndarray, pred: np.ndarray, obs: np.ndarray, threshold: float = 0.1):
