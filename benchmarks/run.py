@@ -8,7 +8,7 @@ time to accuracy. Prints Markdown tables, writes ``results.json`` and the genera
 What is measured, and how:
 
 - **training step**: the compiled chunk of :func:`metriplex.fit` itself
-  (``metriplex.train.train_chunk``: random minibatch, ``value_and_grad`` of the loss, Adam
+  (``metriplex._train.make_chunk``: random minibatch, ``value_and_grad`` of the loss, Adam
   update, ``length`` steps per ``lax.scan``), on a model and loss made by
   ``config.build_model`` / ``config.build_loss`` from data of ``metriplex.systems.generate``.
   Times are medians over repeats after compilation. ``cpu ms`` is process CPU time per step
@@ -73,7 +73,7 @@ from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
-from metriplex.train import default_optimizer, train_chunk  # noqa: E402
+from metriplex._train import default_optimizer, make_chunk  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN = "<!-- benchmarks/run.py: generated results begin -->"
@@ -238,7 +238,7 @@ def compile_train_step(model_name: str, jac: str, batch: int, dtype, length: int
     optimizer = default_optimizer(config.lr, 10_000)
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
-    chunk = train_chunk(loss, optimizer, static, batch)
+    chunk = make_chunk(loss, optimizer, static, batch)
     fn = jax.jit(chunk, static_argnums=3)
     t0 = time.perf_counter()
     compiled = fn.lower(params, opt_state, jr.key(1), length, full).compile()

@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from typing import Any
 
 import equinox as eqx
 import jax
@@ -21,39 +20,24 @@ import numpy as np
 import optax
 from tqdm.auto import tqdm
 
-from . import _checkpoint
 from ._errors import MetriplexError, TrainingDiverged
 from ._model import GenericModel, float_dtype, with_dtype
+from ._train import (
+    History,
+    TrainState,
+    adjustable_optimizer,
+    default_optimizer,
+    is_adjustable,
+    learning_rate_of,
+    make_chunk,
+    with_learning_rate,
+)
 from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
 from .losses import Batch, CrankNicolsonResidual, Loss
 
-
-@dataclasses.dataclass
-class History:
-    """Loss terms per evaluation: ``step``, ``train[name]``, ``valid[name]``, wall ``time``."""
-
-    step: list[int] = dataclasses.field(default_factory=list)
-    train: dict[str, list[float]] = dataclasses.field(default_factory=dict)
-    valid: dict[str, list[float]] = dataclasses.field(default_factory=dict)
-    time: list[float] = dataclasses.field(default_factory=list)
-    learning_rate: list[float] = dataclasses.field(default_factory=list)
-    rollout: list[float] = dataclasses.field(default_factory=list)
-    rollout_failures: list[int] = dataclasses.field(default_factory=list)
-    best_step: int = 0
-    best_valid: float = math.inf
-    best_rollout: float = math.inf
-    best_rollout_failures: int = -1
-    stopped: str = ""
-    converged: bool = False
-
-    def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_json(cls, obj: dict[str, Any]) -> "History":
-        known = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in obj.items() if k in known})
+__all__ = ["History", "Plateau", "RolloutCheck", "adjustable_optimizer", "default_optimizer",
+           "fit"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,95 +196,6 @@ def _batch_sharding(enabled: bool, batch_size: int):
     return shard
 
 
-def adjustable_optimizer(learning_rate: float, warmup: int = 100,
-                         weight_decay: float = 0.0) -> optax.GradientTransformation:
-    """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
-    whose learning rate :func:`fit` can change between chunks (:func:`set_learning_rate`);
-    ``weight_decay`` > 0 makes it AdamW (decoupled decay of every weight)."""
-    return optax.chain(
-        optax.clip_by_global_norm(10.0),
-        optax.scale_by_adam(),
-        optax.add_decayed_weights(weight_decay) if weight_decay else optax.identity(),
-        optax.scale_by_schedule(
-            optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
-        ),
-        optax.inject_hyperparams(optax.scale)(step_size=-float(learning_rate)),
-    )
-
-
-def _lr_state(opt_state):
-    """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
-    last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
-    hyper = getattr(last, "hyperparams", None)
-    return last if isinstance(hyper, dict) and "step_size" in hyper else None
-
-
-def _current_lr(opt_state, default: float) -> float:
-    last = _lr_state(opt_state)
-    return default if last is None else -float(last.hyperparams["step_size"])
-
-
-def set_learning_rate(opt_state, learning_rate: float):
-    """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
-    last = _lr_state(opt_state)
-    old = last.hyperparams["step_size"]
-    hyper = {**last.hyperparams, "step_size": jnp.asarray(-learning_rate, old.dtype)}
-    return (*opt_state[:-1], last._replace(hyperparams=hyper))
-
-
-def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
-    """Adam with a short linear warm-up and cosine decay to 1% of the peak rate (the schedule
-    of ``fit(..., stopping=None)``: a fixed number of steps)."""
-    schedule = optax.warmup_cosine_decay_schedule(
-        init_value=learning_rate * 0.1,
-        peak_value=learning_rate,
-        warmup_steps=min(100, max(steps // 20, 1)),
-        decay_steps=max(steps, 2),
-        end_value=learning_rate * 1e-2,
-    )
-    return optax.chain(optax.clip_by_global_norm(10.0), optax.adam(schedule))
-
-
-def train_chunk(loss: Loss, optimizer, static, batch_size: int, shard=None):
-    """The compiled unit of :func:`fit`: ``chunk(params, opt_state, key, length, full_train)``
-    runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
-    ``full_train`` (a :class:`Batch` of all training pairs), and returns ``(params, opt_state,
-    mean loss, mean loss terms)``.
-
-    The training pairs are an argument, not a closed-over constant, so the data set is not
-    embedded in the compiled program and the chunk can be timed on its own
-    (``benchmarks/run.py``).
-
-    Exposed (privately) so that ``benchmarks/run.py`` times exactly the step that ``fit`` runs.
-    """
-    def loss_fn(p, batch, k):
-        return loss(eqx.combine(p, static), batch, key=k)
-
-    def chunk(params, opt_state, key, length, full_train):
-        n_train = full_train.x0.shape[0]
-
-        def one(carry, k):
-            params, opt_state = carry
-            kb, kl = jr.split(k)
-            idx = jr.randint(kb, (batch_size,), 0, n_train)
-            batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx], full_train.scale)
-            if shard is not None:
-                batch = shard(batch)
-            (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
-            # Optax mixes int step counts with floats; keep it working under strict promotion.
-            with jax.numpy_dtype_promotion("standard"):
-                updates, opt_state = optimizer.update(grads, opt_state, params)
-            params = eqx.apply_updates(params, updates)
-            return (params, opt_state), (value, parts)
-
-        (params, opt_state), (values, parts) = jax.lax.scan(
-            one, (params, opt_state), jr.split(key, length)
-        )
-        return params, opt_state, jnp.mean(values), jax.tree_util.tree_map(jnp.mean, parts)
-
-    return chunk
-
-
 def _scheme_of(loss: Loss):
     """The scheme of the loss's residual term (Crank–Nicolson if it has none)."""
     from .integrate import CrankNicolson
@@ -441,22 +336,18 @@ def fit(
                      else adjustable_optimizer(learning_rate, weight_decay=weight_decay))
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
-    adjustable = stopping is not None and _lr_state(opt_state) is not None
+    adjustable = stopping is not None and is_adjustable(opt_state)
     n_train = len(train_pairs)
     bsz = min(batch_size, n_train)
     shard = _batch_sharding(data_parallel, bsz)
     full_train = _batch(train_pairs, np.arange(n_train), scale, dtype)
-
-    def loss_fn(p, batch, k):
-        return loss(eqx.combine(p, static), batch, key=k)
-
-    run_chunk = eqx.filter_jit(train_chunk(loss, optimizer, static, bsz, shard))
-
-    eval_size = 4096
+    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard))
 
     @eqx.filter_jit
     def evaluate(params, batch, key):
-        return loss_fn(params, batch, key)
+        return loss(eqx.combine(params, static), batch, key=key)
+
+    eval_size = 4096
 
     def eval_pairs(params, pairs: Pairs, key) -> tuple[float, dict[str, float]]:
         m = len(pairs)
@@ -473,159 +364,147 @@ def fit(
         scheme = _scheme_of(loss)
         state_units = state_scale(np.concatenate([train_pairs.x0, valid_data.x]))
 
-    history = History()
-    best_params = restart_params = params
-    best_value = plateau_best = math.inf
-    since_best = 0
-    cuts = 0
-    lr = float(learning_rate)
-    done = 0
     key, eval_key = jr.split(key)
-    train_value, train_parts = math.nan, {}
+    state = TrainState.start(params, opt_state, key, learning_rate)
     if resume:
         if checkpoint is None:
             raise MetriplexError("resume=True needs the `checkpoint` path to resume from.")
-        state = _checkpoint.load(
-            checkpoint, (params, opt_state, best_params, restart_params, jr.key_data(key)))
-        (params, opt_state, best_params, restart_params, key_data), meta = state
-        key = jr.wrap_key_data(key_data)
-        history = History.from_json(meta["history"])
-        done, best_value, since_best = meta["done"], meta["best_value"], meta["since_best"]
-        cuts, lr, plateau_best = meta["cuts"], meta["lr"], meta["plateau_best"]
-        train_value, train_parts = meta["train_value"], meta["train_parts"]
-        if history.stopped.startswith("interrupted"):
-            history.stopped = ""
-        if done > steps:
+        state = state.load(checkpoint)
+        if state.history.stopped.startswith("interrupted"):
+            state.history.stopped = ""
+        if state.done > steps:
             raise MetriplexError(
-                f"the checkpoint is at step {done}, beyond the requested {steps} steps; ask for "
-                "at least as many steps as the interrupted run."
+                f"the checkpoint is at step {state.done}, beyond the requested {steps} steps; "
+                "ask for at least as many steps as the interrupted run."
             )
+    history = state.history
 
     def save_checkpoint():
-        if checkpoint is None:
-            return
-        meta = dict(
-            done=done, best_value=best_value, since_best=since_best, history=history.to_json(),
-            train_value=train_value, train_parts=train_parts, cuts=cuts, lr=lr,
-            plateau_best=plateau_best,
-        )
-        _checkpoint.save(
-            checkpoint, (params, opt_state, best_params, restart_params, jr.key_data(key)), meta)
-
-    start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
-    evaluations = 0
-    skip_evaluation = resume
-    bar = tqdm(total=steps, initial=done, disable=not progress, desc="fit", unit="step", leave=False)
+        if checkpoint is not None:
+            state.save(checkpoint)
 
     # The last fifth of the step budget anneals the rate (cosine to 1%), so a run that the
     # budget ends before it converges still finishes on a small learning rate.
     anneal_from = int(0.8 * steps)
 
     def run_next_chunk():
-        nonlocal key, params, opt_state, train_value, train_parts, done
-        length = min(eval_every, steps - done)
-        if adjustable and done >= anneal_from:
-            frac = (done - anneal_from) / max(steps - anneal_from, 1)
-            opt_state = set_learning_rate(
-                opt_state, lr * (0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))))
-        key, sub = jr.split(key)
-        params, opt_state, value, parts = run_chunk(params, opt_state, sub, length, full_train)
-        train_value = float(value)
-        train_parts = {k: float(v) for k, v in parts.items()}
-        done += length
+        length = min(eval_every, steps - state.done)
+        if adjustable and state.done >= anneal_from:
+            frac = (state.done - anneal_from) / max(steps - anneal_from, 1)
+            state.opt_state = with_learning_rate(
+                state.opt_state,
+                state.lr * (0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))))
+        state.key, sub = jr.split(state.key)
+        state.params, state.opt_state, value, parts = run_chunk(
+            state.params, state.opt_state, sub, length, full_train)
+        state.train_value = float(value)
+        state.train_parts = {k: float(v) for k, v in parts.items()}
+        state.done += length
         bar.update(length)
 
+    def record_evaluation() -> tuple[float, int]:
+        """Evaluate the current parameters, append to the history, keep the best model;
+        return the score and the rollout failures (-1 without rollouts)."""
+        if state.done > 0:
+            tr_total, tr_parts = state.train_value, state.train_parts
+        else:
+            tr_total, tr_parts = eval_pairs(state.params, train_pairs, eval_key)
+        if valid_pairs is not None:
+            va_total, va_parts = eval_pairs(state.params, valid_pairs, eval_key)
+        else:
+            va_total, va_parts = tr_total, {}
+        history.step.append(state.done)
+        history.time.append(time.perf_counter() - start)
+        history.learning_rate.append(learning_rate_of(state.opt_state, state.lr))
+        for name, v in tr_parts.items():
+            history.train.setdefault(name, []).append(v)
+        history.train.setdefault("total", []).append(tr_total)
+        for name, v in va_parts.items():
+            history.valid.setdefault(name, []).append(v)
+        if va_parts:
+            history.valid.setdefault("total", []).append(va_total)
+        if not math.isfinite(tr_total) or not math.isfinite(va_total):
+            bad = [k for k, v in {**tr_parts, **va_parts}.items() if not math.isfinite(v)]
+            history.stopped = f"diverged at step {state.done} (non-finite: {', '.join(bad)})"
+            raise TrainingDiverged(
+                f"training diverged at step {state.done}: the loss term(s) {bad or ['total']} "
+                f"became non-finite. The best model so far (step {history.best_step}) is "
+                "kept; lower the learning rate or the loss weights.",
+                model=eqx.combine(state.best_params, static),
+                history=history,
+            )
+        # The plateau schedule follows the (smooth) validation loss; the model kept is the one
+        # with the best score: held-out rollouts when checked, else that loss.
+        if va_total < state.plateau_best * (1.0 - (stopping.min_delta if stopping else 0.0)):
+            state.since_best = 0
+        else:
+            state.since_best += 1
+        if va_total < state.plateau_best:
+            state.plateau_best, state.restart_params = va_total, state.params
+        score, failures = va_total, -1
+        if windows is not None:
+            score, failures = rollout_score(
+                eqx.combine(state.params, static), scheme, windows, state_units)
+            history.rollout.append(score)
+            history.rollout_failures.append(failures)
+        if score < state.best_value:
+            state.best_value, state.best_params = score, state.params
+            history.best_step, history.best_valid = state.done, va_total
+            if windows is not None:
+                history.best_rollout, history.best_rollout_failures = score, failures
+        postfix = dict(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
+        if windows is not None:
+            postfix["rollout"] = f"{score:.3g}" + (f" ({failures} failed)" if failures else "")
+        bar.set_postfix(**postfix)
+        return score, failures
+
+    def should_stop() -> bool:
+        """Apply the budgets and the plateau schedule after an evaluation."""
+        if state.done >= steps:
+            history.stopped = history.stopped or f"step budget reached ({steps} steps)"
+            return True
+        if max_seconds is not None and history.time[-1] >= max_seconds:
+            history.stopped = f"time budget reached ({max_seconds:g} s) at step {state.done}"
+            return True
+        if stopping is None:
+            if patience is not None and state.since_best > patience:
+                history.stopped = (f"early stop at step {state.done} (no improvement in "
+                                   f"{patience} evaluations)")
+                history.converged = True
+                return True
+        elif state.since_best >= stopping.patience:
+            if state.cuts >= stopping.cuts or not adjustable:
+                history.stopped = (f"converged at step {state.done} (no improvement in "
+                                   f"{stopping.patience} evaluations after {state.cuts} "
+                                   "learning-rate cuts)")
+                history.converged = True
+                return True
+            state.cuts += 1
+            state.lr *= stopping.factor
+            state.params, state.since_best = state.restart_params, 0
+            state.opt_state = with_learning_rate(state.opt_state, state.lr)
+        return False
+
+    start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
+    evaluations = 0
+    bar = tqdm(total=steps, initial=state.done, disable=not progress, desc="fit", unit="step",
+               leave=False)
     try:
-        while True:
-            if skip_evaluation:
-                # Resumed: the restored history already holds the evaluation at `done`.
-                skip_evaluation = False
-                if done >= steps or history.stopped.startswith(("early stop", "converged")):
-                    break
-                run_next_chunk()
-                continue
-            if done > 0 or steps == 0:
-                tr_total, tr_parts = train_value, train_parts
-            else:
-                tr_total, tr_parts = eval_pairs(params, train_pairs, eval_key)
-            if valid_pairs is not None:
-                va_total, va_parts = eval_pairs(params, valid_pairs, eval_key)
-            else:
-                va_total, va_parts = tr_total, {}
-            history.step.append(done)
-            history.time.append(time.perf_counter() - start)
-            history.learning_rate.append(_current_lr(opt_state, lr))
-            for name, v in tr_parts.items():
-                history.train.setdefault(name, []).append(v)
-            history.train.setdefault("total", []).append(tr_total)
-            for name, v in va_parts.items():
-                history.valid.setdefault(name, []).append(v)
-            if va_parts:
-                history.valid.setdefault("total", []).append(va_total)
-            if not math.isfinite(tr_total) or not math.isfinite(va_total):
-                bad = [k for k, v in {**tr_parts, **va_parts}.items() if not math.isfinite(v)]
-                history.stopped = f"diverged at step {done} (non-finite: {', '.join(bad)})"
-                raise TrainingDiverged(
-                    f"training diverged at step {done}: the loss term(s) {bad or ['total']} "
-                    f"became non-finite. The best model so far (step {history.best_step}) is "
-                    "kept; lower the learning rate or the loss weights.",
-                    model=eqx.combine(best_params, static),
-                    history=history,
-                )
-            # The plateau schedule follows the (smooth) validation loss; the model kept is the
-            # one with the best score: held-out rollouts when checked, else that loss.
-            if va_total < plateau_best * (1.0 - (stopping.min_delta if stopping else 0.0)):
-                since_best = 0
-            else:
-                since_best += 1
-            if va_total < plateau_best:
-                plateau_best, restart_params = va_total, params
-            score = va_total
-            failures = -1
-            if windows is not None:
-                score, failures = rollout_score(
-                    eqx.combine(params, static), scheme, windows, state_units)
-                history.rollout.append(score)
-                history.rollout_failures.append(failures)
-            if score < best_value:
-                best_value, best_params = score, params
-                history.best_step, history.best_valid = done, va_total
-                if windows is not None:
-                    history.best_rollout, history.best_rollout_failures = score, failures
-            postfix = dict(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
-            if windows is not None:
-                postfix["rollout"] = f"{score:.3g}" + (f" ({failures} failed)" if failures else "")
-            bar.set_postfix(**postfix)
+        finished = resume and (
+            state.done >= steps or history.stopped.startswith(("early stop", "converged")))
+        if resume and not finished:
+            run_next_chunk()  # the restored history already holds the evaluation at its step
+        while not finished:
+            record_evaluation()
             evaluations += 1
             if evaluations % max(checkpoint_every, 1) == 0:
                 save_checkpoint()
-            if done >= steps:
-                history.stopped = history.stopped or f"step budget reached ({steps} steps)"
+            if should_stop():
                 break
-            if max_seconds is not None and history.time[-1] >= max_seconds:
-                history.stopped = f"time budget reached ({max_seconds:g} s) at step {done}"
-                break
-            if stopping is None:
-                if patience is not None and since_best > patience:
-                    history.stopped = (f"early stop at step {done} (no improvement in "
-                                       f"{patience} evaluations)")
-                    history.converged = True
-                    break
-            elif since_best >= stopping.patience:
-                if cuts >= stopping.cuts or not adjustable:
-                    history.stopped = (f"converged at step {done} (no improvement in "
-                                       f"{stopping.patience} evaluations after {cuts} "
-                                       "learning-rate cuts)")
-                    history.converged = True
-                    break
-                cuts += 1
-                lr *= stopping.factor
-                params, since_best = restart_params, 0
-                opt_state = set_learning_rate(opt_state, lr)
             run_next_chunk()
     except KeyboardInterrupt:
-        history.stopped = f"interrupted at step {done}"
+        history.stopped = f"interrupted at step {state.done}"
     finally:
         bar.close()
     save_checkpoint()
-    return eqx.combine(best_params, static), history
+    return eqx.combine(state.best_params, static), history

@@ -1,0 +1,206 @@
+r"""The training step and the training state: what :func:`~metriplex.fit` runs between two
+evaluations, and everything a checkpoint must hold to continue it.
+
+- :func:`make_chunk`: ``length`` optimiser steps on random minibatches, compiled as one
+  ``lax.scan`` (no host round-trip per step);
+- :func:`adjustable_optimizer`, :func:`learning_rate_of`, :func:`with_learning_rate`: Adam whose
+  rate the loop can change between chunks (plateau cuts, the final annealing);
+- :class:`TrainState`: parameters, optimiser state, best and restart parameters, PRNG key and
+  the loop's counters, saved and restored as one object (:meth:`TrainState.save`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import optax
+
+from . import _checkpoint
+from .losses import Batch, Loss
+
+
+@dataclasses.dataclass
+class History:
+    """Loss terms per evaluation: ``step``, ``train[name]``, ``valid[name]``, wall ``time``."""
+
+    step: list[int] = dataclasses.field(default_factory=list)
+    train: dict[str, list[float]] = dataclasses.field(default_factory=dict)
+    valid: dict[str, list[float]] = dataclasses.field(default_factory=dict)
+    time: list[float] = dataclasses.field(default_factory=list)
+    learning_rate: list[float] = dataclasses.field(default_factory=list)
+    rollout: list[float] = dataclasses.field(default_factory=list)
+    rollout_failures: list[int] = dataclasses.field(default_factory=list)
+    best_step: int = 0
+    best_valid: float = math.inf
+    best_rollout: float = math.inf
+    best_rollout_failures: int = -1
+    stopped: str = ""
+    converged: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, obj: dict[str, Any]) -> "History":
+        known = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in obj.items() if k in known})
+
+
+def adjustable_optimizer(learning_rate: float, warmup: int = 100,
+                         weight_decay: float = 0.0) -> optax.GradientTransformation:
+    """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
+    whose learning rate the training loop can change between chunks
+    (:func:`with_learning_rate`); ``weight_decay`` > 0 makes it AdamW (decoupled decay of every
+    weight)."""
+    return optax.chain(
+        optax.clip_by_global_norm(10.0),
+        optax.scale_by_adam(),
+        optax.add_decayed_weights(weight_decay) if weight_decay else optax.identity(),
+        optax.scale_by_schedule(
+            optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
+        ),
+        optax.inject_hyperparams(optax.scale)(step_size=-float(learning_rate)),
+    )
+
+
+def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
+    """Adam with a short linear warm-up and cosine decay to 1% of the peak rate (the schedule
+    of ``fit(..., stopping=None)``: a fixed number of steps)."""
+    schedule = optax.warmup_cosine_decay_schedule(
+        init_value=learning_rate * 0.1,
+        peak_value=learning_rate,
+        warmup_steps=min(100, max(steps // 20, 1)),
+        decay_steps=max(steps, 2),
+        end_value=learning_rate * 1e-2,
+    )
+    return optax.chain(optax.clip_by_global_norm(10.0), optax.adam(schedule))
+
+
+def _rate_state(opt_state):
+    """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
+    last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
+    hyper = getattr(last, "hyperparams", None)
+    return last if isinstance(hyper, dict) and "step_size" in hyper else None
+
+
+def is_adjustable(opt_state) -> bool:
+    """Whether ``opt_state`` belongs to an :func:`adjustable_optimizer`."""
+    return _rate_state(opt_state) is not None
+
+
+def learning_rate_of(opt_state, default: float) -> float:
+    """The current rate of an :func:`adjustable_optimizer`'s state, else ``default``."""
+    last = _rate_state(opt_state)
+    return default if last is None else -float(last.hyperparams["step_size"])
+
+
+def with_learning_rate(opt_state, learning_rate: float):
+    """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
+    last = _rate_state(opt_state)
+    old = last.hyperparams["step_size"]
+    hyper = {**last.hyperparams, "step_size": jnp.asarray(-learning_rate, old.dtype)}
+    return (*opt_state[:-1], last._replace(hyperparams=hyper))
+
+
+def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static, batch_size: int,
+               shard: Callable[[Batch], Batch] | None = None):
+    """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
+    runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
+    ``full_train`` (a :class:`~metriplex.losses.Batch` of all training pairs), and returns
+    ``(params, opt_state, mean loss, mean loss terms)``.
+
+    The training pairs are an argument, not a closed-over constant, so the data set is not
+    embedded in the compiled program and the chunk can be timed on its own
+    (``benchmarks/run.py`` times exactly this step).
+    """
+    def loss_fn(p, batch, k):
+        return loss(eqx.combine(p, static), batch, key=k)
+
+    def chunk(params, opt_state, key, length, full_train):
+        n_train = full_train.x0.shape[0]
+
+        def one(carry, k):
+            params, opt_state = carry
+            kb, kl = jr.split(k)
+            idx = jr.randint(kb, (batch_size,), 0, n_train)
+            batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx],
+                          full_train.scale)
+            if shard is not None:
+                batch = shard(batch)
+            (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
+            # Optax mixes int step counts with floats; keep it working under strict promotion.
+            with jax.numpy_dtype_promotion("standard"):
+                updates, opt_state = optimizer.update(grads, opt_state, params)
+            params = eqx.apply_updates(params, updates)
+            return (params, opt_state), (value, parts)
+
+        (params, opt_state), (values, parts) = jax.lax.scan(
+            one, (params, opt_state), jr.split(key, length)
+        )
+        return params, opt_state, jnp.mean(values), jax.tree_util.tree_map(jnp.mean, parts)
+
+    return chunk
+
+
+@dataclasses.dataclass
+class TrainState:
+    """Everything the training loop carries from one evaluation to the next.
+
+    Arrays: the current ``params`` and ``opt_state``, the ``best_params`` (best validation
+    score, the model returned), the ``restart_params`` (best validation loss, where a plateau
+    cut restarts from) and the PRNG ``key``. Counters: optimiser steps ``done``, the best score
+    and loss so far, evaluations ``since_best`` improvement, learning-rate ``cuts`` and the
+    current base rate ``lr``, the last chunk's mean training loss, and the ``history``.
+    """
+
+    params: Any
+    opt_state: Any
+    best_params: Any
+    restart_params: Any
+    key: Any
+    lr: float
+    done: int = 0
+    best_value: float = math.inf
+    plateau_best: float = math.inf
+    since_best: int = 0
+    cuts: int = 0
+    train_value: float = math.nan
+    train_parts: dict[str, float] = dataclasses.field(default_factory=dict)
+    history: History = dataclasses.field(default_factory=History)
+
+    @classmethod
+    def start(cls, params, opt_state, key, lr: float) -> "TrainState":
+        return cls(params=params, opt_state=opt_state, best_params=params,
+                   restart_params=params, key=key, lr=float(lr))
+
+    def _arrays(self):
+        return (self.params, self.opt_state, self.best_params, self.restart_params,
+                jr.key_data(self.key))
+
+    def save(self, path) -> None:
+        """Write the state to ``path`` atomically (JSON header + Equinox leaves)."""
+        meta = dict(
+            done=self.done, best_value=self.best_value, since_best=self.since_best,
+            history=self.history.to_json(), train_value=self.train_value,
+            train_parts=self.train_parts, cuts=self.cuts, lr=self.lr,
+            plateau_best=self.plateau_best,
+        )
+        _checkpoint.save(path, self._arrays(), meta)
+
+    def load(self, path) -> "TrainState":
+        """The state saved at ``path``, read with this state's array structure."""
+        (params, opt_state, best, restart, key_data), meta = _checkpoint.load(
+            path, self._arrays())
+        return TrainState(
+            params=params, opt_state=opt_state, best_params=best, restart_params=restart,
+            key=jr.wrap_key_data(key_data), lr=meta["lr"], done=meta["done"],
+            best_value=meta["best_value"], plateau_best=meta["plateau_best"],
+            since_best=meta["since_best"], cuts=meta["cuts"], train_value=meta["train_value"],
+            train_parts=meta["train_parts"], history=History.from_json(meta["history"]),
+        )
