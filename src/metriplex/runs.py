@@ -23,12 +23,12 @@ from . import plots
 from ._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._model import with_dtype
-from .config import RunConfig, build_loss, build_model, units_for, validate
-from .data import Trajectories, state_scale
+from .config import RunConfig, build_loss, build_model, stopping_for, units_for, validate
+from .data import Trajectories, state_scale, time_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
 from .io import check_output_folder, save, write_json
-from .train import Plateau, fit
+from .train import fit
 
 
 def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool = False) -> None:
@@ -124,8 +124,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress):
             batch_size=config.batch_size,
             validation=valid,
             eval_every=config.eval_every,
-            patience=config.patience,
-            stopping=Plateau(cuts=config.lr_cuts),
+            stopping=stopping_for(config),
             max_seconds=None if config.max_minutes is None else 60.0 * config.max_minutes,
             scale=units.rate,
             dtype=dtype,
@@ -207,37 +206,48 @@ def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path
 
 def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
                    solver: str | None = None):
-    """The report figure set for trajectory ``k`` of ``data``: trajectories (model vs data),
-    overall and per-variable rollout error over time, the one-step residual of every observed
-    pair over time, and the learned E and S along the rollout."""
+    """The report figure set: every trajectory's rollout error over time (failed rollouts
+    marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
+    trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
+    over time, and the learned E and S along the rollout (each marks where the rollout failed,
+    if it did). Residuals are in the data's rate units (data scale / time scale)."""
     sch = scheme_from_name(scheme, solver=solver)
     out, xs, lengths = rollout_data(model, data, scheme=sch)
+    all_ts = np.asarray(out.ts, dtype=np.float64)
+    all_pred = np.asarray(out.xs, dtype=np.float64)
+    failed = np.asarray(out.failed_step)
     T = int(lengths[k])
-    ts = np.asarray(out.ts)[k, :T]
-    pred = np.asarray(out.xs)[k, :T]
-    obs = xs[k, :T]
+    ts, pred, obs = all_ts[k, :T], all_pred[k, :T], xs[k, :T]
+    failed_at = float(ts[min(int(failed[k]), T - 1)]) if failed[k] >= 0 else None
     names = list(data.names)
-    plots.save_figure(plots.trajectories(ts, pred, obs, names), folder / "trajectories",
-                      t=ts, learned=pred, observed=obs, names=np.array(names))
-    err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
+    plots.save_figure(plots.trajectories(ts, pred, obs, names, failed_at=failed_at),
+                      folder / "trajectories", t=ts, learned=pred, observed=obs,
+                      names=np.array(names), failed_step=failed[k])
+    # Errors of every trajectory: NaN after a failure (never a number standing for it).
+    errors = np.full(all_pred.shape[:2], np.nan)
+    for j, Tj in enumerate(lengths):
+        errors[j, :Tj] = error_over_time(all_pred[j, :Tj], xs[j, :Tj])
     scale = state_scale(data.x)
-    per_var = np.abs(np.nan_to_num(pred, nan=np.inf) - obs) / scale[None, :]
-    plots.save_figure(plots.error_over_time(ts, err, per_variable=dict(zip(names, per_var.T))),
-                      folder / "error", t=ts, error=err, error_per_variable=per_var,
-                      names=np.array(names))
-    # The residual of each observed pair under the scheme, in units of the data scale.
+    per_var = np.abs(pred - obs) / scale[None, :]
+    plots.save_figure(
+        plots.rollout_errors(all_ts, errors, failed_step=failed,
+                             per_variable=dict(zip(names, per_var.T)), trajectory=k,
+                             ids=list(data.ids)),
+        folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
+        error_per_variable=per_var, names=np.array(names))
+    # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
+    rate = scale / time_scale(data.pairs(), scale)
     tk, xk = data.padded()[0][k, :T], obs
     dtype = out.xs.dtype
     x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
     dt = jnp.asarray(np.diff(tk), dtype)
     t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
     res = jax.vmap(sch.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
-    res = np.asarray(res, dtype=np.float64) / scale[None, :]
+    res = np.asarray(res, dtype=np.float64) / rate[None, :]
     plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
                       t=tk[1:], residual=res, names=np.array(names))
-    xp = jnp.nan_to_num(jnp.asarray(pred))
-    E = np.asarray(jax.vmap(model.energy)(xp))
-    S = np.asarray(jax.vmap(model.entropy)(xp))
-    plots.save_figure(plots.energy_entropy(ts, E, S), folder / "energy_entropy", t=ts,
-                      energy=E, entropy=S)
-
+    xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
+    E = np.asarray(jax.vmap(model.energy)(xp), dtype=np.float64)
+    S = np.asarray(jax.vmap(model.entropy)(xp), dtype=np.float64)
+    plots.save_figure(plots.energy_entropy(ts, E, S, failed_at=failed_at),
+                      folder / "energy_entropy", t=ts, energy=E, entropy=S)

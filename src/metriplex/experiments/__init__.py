@@ -215,7 +215,9 @@ def run_experiment(
         print("  (the accuracy bars are for full runs; a --quick run only has to beat the "
               "untrained model by a wide margin)")
     for k, b in metrics["bars"].items():
-        print(f"  {k}: {b['value']:.3e} vs {'full-run ' if quick else ''}target "
+        value = "null (" + metrics.get("null_reasons", {}).get(k, "not computed") + ")" \
+            if b["value"] is None else f"{b['value']:.3e}"
+        print(f"  {k}: {value} vs {'full-run ' if quick else ''}target "
               f"{b['target']:.0e}: {'met' if b['met'] else 'NOT met'}")
     return metrics
 
@@ -281,7 +283,10 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
     obs = xs[k, :T]
     names = list(test.names)
     result: dict[str, Any] = {}
-    plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label="true"),
+    fail_k = int(np.asarray(out.failed_step)[k])
+    failed_at = float(ts[min(fail_k, T - 1)]) if fail_k >= 0 else None
+    plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label="true",
+                                         failed_at=failed_at),
                       folder / "trajectories", t=ts, learned=pred, true=obs,
                       names=np.array(names))
     if exp.system.startswith("pendulum"):
@@ -300,9 +305,9 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
         ]
     truth_out = rollout_data(system.model, test, scheme=CrankNicolson())[0]
     ref = error_over_time(np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs)
-    err = error_over_time(np.nan_to_num(pred, nan=np.inf), obs)
-    plots.save_figure(plots.error_over_time(ts, err, reference=ref), folder / "error", t=ts,
-                      learned=err, ground_truth_cn=ref)
+    err = error_over_time(pred, obs)  # NaN after a failure: the figure marks it
+    plots.save_figure(plots.error_over_time(ts, err, reference=ref, failed_at=failed_at),
+                      folder / "error", t=ts, learned=err, ground_truth_cn=ref)
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
     x_all = jnp.asarray(test.x)
@@ -321,11 +326,13 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
                           true=S_t, learned=S_l)
     m = test.trajectory == test.ids[k]
     fe, fs = result["energy_gauge_fit"], result.get("entropy_gauge_fit")
-    E_k = np.asarray(jax.vmap(model.energy)(jnp.asarray(np.nan_to_num(pred), dtype)), dtype=np.float64)
-    S_k = np.asarray(jax.vmap(model.entropy)(jnp.asarray(np.nan_to_num(pred), dtype)), dtype=np.float64)
+    # NaN after a failure (not the potentials of a zero state).
+    E_k = np.asarray(jax.vmap(model.energy)(jnp.asarray(pred, dtype)), dtype=np.float64)
+    S_k = np.asarray(jax.vmap(model.entropy)(jnp.asarray(pred, dtype)), dtype=np.float64)
     E_fit = fe["slope"] * E_t[m] + fe["offset"]
     S_fit = None if fs is None else fs["slope"] * S_t[m] + fs["offset"]
-    plots.save_figure(plots.energy_entropy(ts, E_k, S_k, E_true=E_fit, S_true=S_fit),
+    plots.save_figure(plots.energy_entropy(ts, E_k, S_k, E_true=E_fit, S_true=S_fit,
+                                           failed_at=failed_at),
                       folder / "energy_entropy", t=ts, energy=E_k, entropy=S_k,
                       energy_true_fitted=E_fit,
                       **({} if S_fit is None else {"entropy_true_fitted": S_fit}))

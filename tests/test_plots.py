@@ -1,0 +1,157 @@
+"""Figures stay readable when rollouts fail and when there are many variables (#14): finite
+axes, failures marked and counted, a label on every axis, legends beside the lines, never
+over them. Warnings are errors here, so every figure also renders without one."""
+
+import jax.numpy as jnp
+import matplotlib.pyplot as plt
+import numpy as np
+
+import metriplex as mx
+from metriplex import plots
+from metriplex.runs import report_figures
+
+FIGURES = ("trajectories", "error", "residual", "energy_entropy")
+
+
+def _check_axes(fig):
+    """Every visible panel has a y label, an x label where its x axis is numbered (panels
+    that share the bottom panel's time axis are not), and finite limits."""
+    fig.canvas.draw()
+    for ax in fig.axes:
+        if not ax.axison:
+            continue
+        assert ax.get_ylabel(), ax.get_title()
+        if any(t.get_visible() and t.get_text() for t in ax.get_xticklabels()):
+            assert ax.get_xlabel(), (ax.get_title(), ax.get_ylabel())
+        assert np.all(np.isfinite(ax.get_ylim())) and np.all(np.isfinite(ax.get_xlim()))
+
+
+def _legend_outside(ax):
+    """The legend's box and the axes' box do not overlap (up to a pixel)."""
+    legend = ax.get_legend()
+    r = ax.figure.canvas.get_renderer()
+    lb, ab = legend.get_window_extent(r), ax.get_window_extent(r)
+    return lb.x0 >= ab.x1 - 1 or lb.x1 <= ab.x0 + 1 or lb.y0 >= ab.y1 - 1 or lb.y1 <= ab.y0 + 1
+
+
+def test_error_figure_of_failed_rollouts_has_a_readable_axis_and_counts_the_failures():
+    # 20 trajectories, 3 of which blow up (1e13 before the step that fails, then NaN), one
+    # with a denormal error (1e-315) and an exact zero at t = 0: what made the axis span
+    # 1e-315 ... 1e13.
+    T, K = 50, 20
+    ts = np.tile(np.linspace(0.0, 5.0, T), (K, 1))
+    rng = np.random.default_rng(0)
+    err = np.abs(rng.normal(size=(K, T))) * 1e-2
+    err[:, 0] = 0.0
+    err[1, 5] = 1e-315
+    failed = np.full(K, -1)
+    for k, step in ((3, 30), (7, 12), (11, 1)):
+        failed[k] = step
+        err[k, step - 1] = 1e13
+        err[k, step:] = np.nan
+    per_var = {f"x{i}": err[0] * (i + 1) for i in range(3)}
+    fig = plots.rollout_errors(ts, err, failed_step=failed, per_variable=per_var, trajectory=0)
+    _check_axes(fig)
+    left = fig.axes[0]
+    assert "3 of 20 failed" in left.get_title()
+    lo, hi = left.get_ylim()
+    assert lo >= 1e-14 and hi <= 10 * plots.ERROR_CEILING, (lo, hi)
+    marks = [ln for ln in left.get_lines() if ln.get_marker() == "x" and len(ln.get_xdata())]
+    assert len(marks) == 3
+    assert sorted(float(m.get_xdata()[0]) for m in marks) == sorted(
+        float(ts[0, s]) for s in (30, 12, 1))
+    plt.close(fig)
+    # The single-trajectory figure of the experiments: the same axis rules, the failure marked.
+    e = err[3].copy()
+    fig = plots.error_over_time(ts[3], e, reference=err[0], failed_at=float(ts[3, 30]))
+    _check_axes(fig)
+    lo, hi = fig.axes[0].get_ylim()
+    assert lo >= 1e-14 and hi <= 10 * plots.ERROR_CEILING
+    assert "failed at t = " in fig.axes[0].get_title()
+    plt.close(fig)
+
+
+def test_many_variables_name_the_largest_and_keep_the_legend_off_the_lines():
+    T, n = 30, 50
+    ts = np.linspace(0.0, 3.0, T)
+    rng = np.random.default_rng(1)
+    names = [f"v{i}" for i in range(n)]
+    per_var = {name: (1.0 + 0.5 * np.sin(ts)) * (i + 1) for i, name in enumerate(names)}
+    fig = plots.rollout_errors(np.tile(ts, (2, 1)), np.abs(rng.normal(size=(2, T))),
+                               per_variable=per_var, trajectory=0)
+    _check_axes(fig)
+    right = fig.axes[1]
+    labels = right.get_legend_handles_labels()[1]
+    assert len(labels) == plots.MAX_LABELS + 1 and labels[-1] == "other 42 variables"
+    assert set(labels[:-1]) == {f"v{i}" for i in range(n - plots.MAX_LABELS, n)}  # the largest
+    assert _legend_outside(right)
+    plt.close(fig)
+    fig = plots.residual_over_time(ts[1:], rng.normal(size=(T - 1, n)), names)
+    _check_axes(fig)
+    assert _legend_outside(fig.axes[0])
+    plt.close(fig)
+    fig = plots.trajectories(ts, rng.normal(size=(T, n)), rng.normal(size=(T, n)), names)
+    _check_axes(fig)
+    assert "first 12 of 50 variables" in fig.get_suptitle()
+    plt.close(fig)
+
+
+def _blow_up(c):
+    """p' = -c (p^2 + 1): p = tan(...) blows up, sooner from some states than from others."""
+    return mx.GenericModel(mx.Known(lambda x: c * x[0] * (x[1] ** 2 + 1.0)), mx.SumOf((2,)),
+                           mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+
+
+def test_report_figures_of_failing_rollouts(tmp_path):
+    ts = np.arange(21) * 0.1
+    xs = np.random.default_rng(0).normal(size=(8, 21, 3))
+    # Ragged: trajectory 3 (the one drawn, and it fails) is shorter than the padded grid.
+    data = mx.Trajectories.from_list([(ts[:T], x[:T]) for x, T in zip(xs, [21, 18, 21, 19] * 2)],
+                                     ("q", "p", "s"))
+    report_figures(_blow_up(0.5), data, tmp_path, scheme="rk4", k=3)
+    for name in FIGURES:
+        for ext in ("png", "pdf", "npz"):
+            assert (tmp_path / f"{name}.{ext}").is_file(), (name, ext)
+    raw = np.load(tmp_path / "error.npz")
+    failed = raw["failed_step"]
+    assert failed[3] >= 0 and 0 < np.sum(failed >= 0) < len(failed)
+    # A failed rollout has no error after its failure: NaN, never a number standing for it.
+    for k in np.flatnonzero(failed >= 0):
+        assert np.all(np.isnan(raw["error"][k, failed[k]:]))
+    energy = np.load(tmp_path / "energy_entropy.npz")["energy"]
+    assert np.all(np.isnan(energy[failed[3]:])) and np.all(np.isfinite(energy[:failed[3]]))
+
+
+def test_a_rollout_that_fails_at_its_first_step_still_draws_on_the_whole_time_axis():
+    ts = np.linspace(0.0, 2.0, 21)
+    E = np.full(21, np.nan)
+    E[0] = 33.2
+    fig = plots.energy_entropy(ts, E, -E, failed_at=0.1)
+    _check_axes(fig)
+    for ax in fig.axes:
+        assert ax.get_xlim() == (0.0, 2.0)
+        assert ax.get_lines()[0].get_marker() == "o"  # one point, drawn as a point
+        assert "failed at t = 0.1" in ax.get_title()
+    plt.close(fig)
+    fig = plots.rollout_errors(ts[None, :], np.full((1, 21), np.nan), failed_step=[1])
+    _check_axes(fig)
+    assert "1 of 1 failed" in fig.axes[0].get_title()
+    assert fig.axes[0].get_xlim() == (0.0, 2.0)
+    plt.close(fig)
+
+
+def test_report_figures_with_fifty_variables(tmp_path):
+    n = 50
+    w = jnp.linspace(0.5, 3.0, n // 2)
+    chain = mx.GenericModel(
+        mx.Known(lambda x: 0.5 * jnp.sum(w**2 * x[: n // 2] ** 2 + x[n // 2:] ** 2)),
+        mx.ZeroPotential(), mx.CanonicalPoisson(n, n // 2), mx.ZeroFriction(n))
+    ts = np.arange(16) * 0.1
+    x0 = np.random.default_rng(2).uniform(-1.0, 1.0, (2, n))
+    xs = np.asarray(mx.solve(chain, jnp.asarray(x0), jnp.asarray(ts), scheme=mx.RK4()).xs)
+    noisy = xs + 1e-3 * np.random.default_rng(3).normal(size=xs.shape)
+    data = mx.Trajectories.from_list([(ts, x) for x in noisy])
+    report_figures(chain, data, tmp_path, scheme="rk4")
+    for name in FIGURES:
+        assert (tmp_path / f"{name}.png").is_file(), name
+    assert np.load(tmp_path / "error.npz")["error_per_variable"].shape == (16, n)
