@@ -292,6 +292,11 @@ def cmd_evaluate(args) -> None:
             f"--verdict-steps must be >= 1 (training steps of the black-box reference); got "
             f"{args.verdict_steps}. Pass --no-verdict to skip the verdict."
         )
+    if args.strict and args.no_verdict:
+        raise MetriplexError(
+            "--strict exits with the verdict's outcome, and --no-verdict skips the verdict; "
+            "got both. Drop one of them."
+        )
     _scheme(args)  # a damaged config.json is reported before any work
     _honour_model_dtype(args.run)
     model = load(args.run)
@@ -301,20 +306,30 @@ def cmd_evaluate(args) -> None:
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver)
     if not args.no_verdict:
-        from .runs import run_config
+        from .runs import run_config, training_outcome
         from .verdict import verdict
 
         cfg = run_config(args.run).get("config", {})
+        ended = training_outcome(args.run)
         metrics["verdict"] = verdict(
-            model, data, width=cfg.get("width", 64), depth=cfg.get("depth", 2),
+            model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],
+            width=cfg.get("width", 64), depth=cfg.get("depth", 2),
             steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
             batch_size=cfg.get("batch_size", 256), progress=False,
         )
-        print(metrics["verdict"]["statement"], file=sys.stderr)
+        print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
     if args.out:
         write_json(Path(args.out), metrics)
     summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
-    print(json.dumps(summary, indent=2, default=str))
+    if "verdict" in metrics:
+        summary["verdict"] = metrics["verdict"]["outcome"]
+    from .io import _strict
+
+    print(json.dumps(_strict(summary), indent=2, default=str))
+    if args.strict:
+        from .verdict import EXIT_STATUS
+
+        return EXIT_STATUS[metrics["verdict"]["outcome"]]
 
 
 def cmd_reproduce(args) -> None:
@@ -391,9 +406,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "fixed-point")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
     p.add_argument("--no-verdict", action="store_true",
-                   help="skip the 'is it GENERIC?' verdict (it trains a black-box reference)")
+                   help="skip the 'is it GENERIC?' verdict (consistent | not consistent | "
+                   "cannot tell, each reason with its figure, under `verdict` in the JSON; it "
+                   "trains a black-box reference)")
     p.add_argument("--verdict-steps", type=int, default=3000,
                    help="training steps of the black-box reference (default 3000)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with the verdict's outcome, for scripts: 0 consistent, 1 not "
+                   "consistent, 3 cannot tell (2 stays bad input); the outcome is also "
+                   "`verdict.outcome` in the --out JSON")
     p.add_argument("--overwrite", action="store_true")
     p.set_defaults(func=cmd_evaluate)
 

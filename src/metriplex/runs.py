@@ -173,6 +173,23 @@ def run_config(run_dir: str | Path) -> dict:
     return obj
 
 
+def training_outcome(run_dir: str | Path) -> dict:
+    """How the run's training ended, from its ``history.json``: ``converged`` (bool) and
+    ``stopped`` (the reason), both ``None`` when unknown (a bare model file, no history, or
+    one that cannot be read). The verdict weighs them."""
+    path = Path(run_dir) / "history.json"
+    try:
+        obj = json.loads(path.read_text()) if path.is_file() else {}
+    except (OSError, ValueError, UnicodeDecodeError):
+        obj = {}
+    if not isinstance(obj, dict):
+        obj = {}
+    converged = obj.get("converged")
+    stopped = obj.get("stopped")
+    return {"converged": converged if isinstance(converged, bool) else None,
+            "stopped": stopped if isinstance(stopped, str) and stopped else None}
+
+
 def check_names(run_dir, data: Trajectories) -> None:
     """The data must have the columns the model was trained on, in the same order."""
     from .io import read_header
