@@ -69,17 +69,22 @@ def adjustable_optimizer(learning_rate: float, warmup: int = 100,
     )
 
 
-def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
-    """Adam with a short linear warm-up and cosine decay to 1% of the peak rate (the schedule
-    of ``fit(..., stopping=None)``: a fixed number of steps)."""
-    schedule = optax.warmup_cosine_decay_schedule(
+def cosine_schedule(learning_rate: float, steps: int) -> optax.Schedule:
+    """A short linear warm-up, then cosine decay to 1% of the peak rate over ``steps``."""
+    return optax.warmup_cosine_decay_schedule(
         init_value=learning_rate * 0.1,
         peak_value=learning_rate,
         warmup_steps=min(100, max(steps // 20, 1)),
         decay_steps=max(steps, 2),
         end_value=learning_rate * 1e-2,
     )
-    return optax.chain(optax.clip_by_global_norm(10.0), optax.adam(schedule))
+
+
+def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
+    """Adam on the :func:`cosine_schedule` (the optimiser of ``fit(..., stopping=None)``: a
+    fixed number of steps)."""
+    return optax.chain(optax.clip_by_global_norm(10.0),
+                       optax.adam(cosine_schedule(learning_rate, steps)))
 
 
 def _rate_state(opt_state):

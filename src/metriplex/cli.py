@@ -39,7 +39,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_structure_options(p: argparse.ArgumentParser) -> None:
-    from .config import RunConfig
+    from .config import SCHEDULES, RunConfig
 
     d = RunConfig()
     g = p.add_argument_group("structure (what is learned, what is given)")
@@ -95,6 +95,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "training stops; default 20)")
     w.add_argument("--lr-cuts", type=int, help="learning-rate cuts before training stops "
                    f"(default {d.lr_cuts})")
+    w.add_argument("--schedule", choices=sorted(SCHEDULES), help="learning-rate schedule: "
+                   + "; ".join(f"{k}: {v}" for k, v in SCHEDULES.items()).replace("%", "%%"))
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")

@@ -32,6 +32,7 @@ from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, Zer
 from .structure.lie_poisson import LiePoisson
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
 from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
+from .train import Plateau
 
 FEATURES = {
     # The seed paper's pendulum featurisation: (|q1|^2, |q2 - q1|^2, |p1|^2, |p2|^2, s1, s2).
@@ -74,6 +75,7 @@ class RunConfig:
     eval_every: int = 100
     patience: int | None = None
     lr_cuts: int = 3
+    schedule: str = "plateau"
     max_minutes: float | None = None
     seed: int = 0
     float64: bool = False
@@ -194,6 +196,11 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
+    if config.schedule not in SCHEDULES:
+        raise MetriplexError(
+            f"--schedule must be one of {', '.join(SCHEDULES)}; got {config.schedule!r}. "
+            "Example: --schedule plateau."
+        )
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise MetriplexError(f"--max-minutes must be > 0; got {config.max_minutes}.")
     what = {"width": "units per hidden layer", "depth": "hidden layers",
@@ -402,6 +409,24 @@ def build_model(config: RunConfig, data: Trajectories, *, key,
     return GenericModel(energy, entropy, poisson, friction)
 
 
+#: Learning-rate schedules by name: what ``--schedule`` means.
+SCHEDULES = {
+    "plateau": "cut the rate when the validation loss stops improving, stop after --lr-cuts "
+               "cuts; --steps is a cap (default)",
+    "cosine": "exactly --steps steps, the rate decayed by a cosine to 1%",
+}
+
+
+def stopping_for(config: RunConfig) -> Plateau | None:
+    """The ``stopping`` argument of :func:`~metriplex.fit` that ``config.schedule`` names
+    (``None``: exactly ``config.steps`` steps of a cosine schedule, no early stop)."""
+    if config.schedule != "plateau":
+        return None
+    if config.patience is None:
+        return Plateau(cuts=config.lr_cuts)
+    return Plateau(patience=config.patience, cuts=config.lr_cuts)
+
+
 def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     r"""Scheme residual plus the penalties that the structure needs (none where exact).
 
@@ -453,9 +478,11 @@ PRESETS: dict[str, dict[str, Any]] = {
     # still-wrong E, and a strong penalty holds M near 0 while E is learned (gas, 10 000 steps,
     # test error: weight 100 -> 0.34, 10 -> 0.085, 1 -> 0.043, 0.1 -> 0.013; 30 000 steps,
     # weight 1 -> 0.012 with a 10x smaller degeneracy residual than weight 0.1).
+    # schedule "cosine": the fixed 30 000-step cosine schedule reached test error 1.2e-2; the
+    # plateau schedule (evaluations every 600 steps here) 3.5e-2 at the same cap.
     "gas-containers": dict(
         energy="neural", entropy="sum:2,3", poisson="canonical:1", friction="neural",
-        width=64, depth=2, lr=1e-2, batch_size=256, w_degeneracy_M=1.0,
+        width=64, depth=2, lr=1e-2, batch_size=256, w_degeneracy_M=1.0, schedule="cosine",
     ),
 }
 

@@ -26,6 +26,7 @@ from ._train import (
     History,
     TrainState,
     adjustable_optimizer,
+    cosine_schedule,
     default_optimizer,
     is_adjustable,
     learning_rate_of,
@@ -331,9 +332,12 @@ def fit(
     scale = np.asarray(scale, dtype=np.float64)
     model = with_dtype(model, dtype)
 
-    if optimizer is None:
-        optimizer = (default_optimizer(learning_rate, steps) if stopping is None
-                     else adjustable_optimizer(learning_rate, weight_decay=weight_decay))
+    rate_at = None  # the rate as a function of the step, where a fixed schedule sets it
+    if optimizer is None and stopping is None:
+        optimizer = default_optimizer(learning_rate, steps)
+        rate_at = cosine_schedule(learning_rate, steps)
+    elif optimizer is None:
+        optimizer = adjustable_optimizer(learning_rate, weight_decay=weight_decay)
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
     adjustable = stopping is not None and is_adjustable(opt_state)
@@ -415,7 +419,8 @@ def fit(
             va_total, va_parts = tr_total, {}
         history.step.append(state.done)
         history.time.append(time.perf_counter() - start)
-        history.learning_rate.append(learning_rate_of(state.opt_state, state.lr))
+        history.learning_rate.append(learning_rate_of(state.opt_state, state.lr)
+                                     if rate_at is None else float(rate_at(state.done)))
         for name, v in tr_parts.items():
             history.train.setdefault(name, []).append(v)
         history.train.setdefault("total", []).append(tr_total)

@@ -1,0 +1,38 @@
+"""The learning-rate schedule is chosen by name on the command line and reaches fit as an object."""
+
+import jax.numpy as jnp
+import pytest
+
+from metriplex._errors import MetriplexError
+from metriplex.config import SCHEDULES, RunConfig, stopping_for, validate
+from metriplex.runs import train_run
+from metriplex.train import Plateau
+from helpers import damped_oscillator, make_data, oscillator_x0
+
+
+def test_schedule_names_become_stopping_objects():
+    assert stopping_for(RunConfig()) == Plateau(cuts=RunConfig().lr_cuts)
+    assert stopping_for(RunConfig(patience=4)) == Plateau(patience=4, cuts=RunConfig().lr_cuts)
+    assert stopping_for(RunConfig(schedule="cosine", patience=4)) is None
+    assert set(SCHEDULES) == {"plateau", "cosine"}
+
+
+def test_an_unknown_schedule_is_refused_with_the_choices():
+    with pytest.raises(MetriplexError, match=r"--schedule must be one of plateau, cosine; got 'step'"):
+        validate(RunConfig(schedule="step"), 3)
+
+
+@pytest.mark.parametrize("schedule", ["cosine", "plateau"])
+def test_cosine_runs_the_whole_budget_and_plateau_stops_on_its_own(tmp_path, schedule):
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
+    # patience 1 and no cuts: the plateau schedule stops at the first evaluation that does not
+    # improve, long before the 3 000-step budget; the cosine schedule never stops early.
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=3000,
+                       eval_every=50, patience=1, lr_cuts=0, schedule=schedule, float64=True)
+    _, history, *_ = train_run(data, config, tmp_path / schedule, progress=False)
+    if schedule == "cosine":
+        assert history.step[-1] == 3000 and history.stopped.startswith("step budget")
+        assert history.learning_rate[-1] < 0.02 * config.lr  # decayed to 1% of the peak
+    else:
+        assert history.step[-1] < 3000 and history.converged
+    assert history.learning_rate[0] > 0 and jnp.isfinite(history.train["total"][-1])
