@@ -361,45 +361,56 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="generate trajectories of a built-in system",
                        description=_systems_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("system", metavar="SYSTEM")
-    p.add_argument("--trajectories", type=int, required=True)
-    p.add_argument("--steps", type=int, required=True)
-    p.add_argument("--dt", type=float, required=True)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("system", metavar="SYSTEM", help="a built-in system (listed above)")
+    p.add_argument("--trajectories", type=int, required=True,
+                   help="number of trajectories, each from its own random initial state")
+    p.add_argument("--steps", type=int, required=True,
+                   help="steps per trajectory (each trajectory has STEPS + 1 samples)")
+    p.add_argument("--dt", type=float, required=True,
+                   help="time between samples, in the system's time unit")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the initial states (default 0)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="system parameter, e.g. --param parameter_set=spnn or --param inertia=10,20,40")
     p.add_argument("--float64", action="store_true", help="integrate in float64")
-    p.add_argument("--out", required=True)
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--out", required=True, help="data file to write: .npz, .csv, .h5 or .mat")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("train", help="learn a GENERIC model from trajectory data")
-    p.add_argument("data", metavar="DATA")
-    p.add_argument("--out", required=True, metavar="RUN_DIR")
+    p = sub.add_parser("train", help="learn a GENERIC model from trajectory data",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("data", metavar="DATA", help="trajectory data (format below)")
+    p.add_argument("--out", required=True, metavar="RUN_DIR",
+                   help="run folder: model.mpx, config.json, history.json, metrics.json, "
+                   "checkpoint.ckpt, figures/")
     p.add_argument("--preset", help="rigid-body | pendulum-energetic | pendulum-temperature | "
                    "gas-containers")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_structure_options(p)
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("rollout", help="predict every trajectory of DATA from its first state")
-    p.add_argument("run", metavar="RUN_DIR")
-    p.add_argument("data", metavar="DATA")
-    p.add_argument("--out", required=True)
+    p = sub.add_parser("rollout", help="predict every trajectory of DATA from its first state",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
+    p.add_argument("data", metavar="DATA", help="trajectories to predict (format below)")
+    p.add_argument("--out", required=True,
+                   help="predictions, in the data format: .npz, .csv, .h5 or .mat")
     p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
                    "scheme the run was trained with)")
     p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.set_defaults(func=cmd_rollout)
 
-    p = sub.add_parser("evaluate", help="metrics (and figures) of a trained model on DATA")
-    p.add_argument("run", metavar="RUN_DIR")
-    p.add_argument("data", metavar="DATA")
-    p.add_argument("--out", metavar="METRICS.json")
+    p = sub.add_parser("evaluate", help="metrics (and figures) of a trained model on DATA",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
+    p.add_argument("data", metavar="DATA", help="test trajectories (format below)")
+    p.add_argument("--out", metavar="METRICS.json",
+                   help="write the metrics as strict JSON here (default: print a summary only)")
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
     p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
                    "scheme the run was trained with)")
@@ -417,7 +428,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="exit with the verdict's outcome, for scripts: 0 consistent, 1 not "
                    "consistent, 3 cannot tell (2 stays bad input); the outcome is also "
                    "`verdict.outcome` in the --out JSON")
-    p.add_argument("--overwrite", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser("reproduce", help="run a reference experiment end to end, with figures")
@@ -429,10 +440,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--defaults", action="store_true",
                    help="train with the experiment's structure only (what is learned, what is "
                    "given) and default settings, as without a preset")
-    p.add_argument("--overwrite", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_reproduce)
     return parser
+
+
+_OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
+
+DATA_FORMAT = """\
+data format: one row per observed state, in one of
+  .csv  columns trajectory,t,<name_1>,...,<name_n> (integer trajectory id, time, the state)
+  .npz  arrays trajectory (N,), t (N,), x (N, n), optional names (n,)
+  .h5   one group per trajectory, each with datasets t (T,) and x (T, n)
+  .mat  snapshots (trajectories x variables x snapshots) with a time vector or step
+Trajectories may be ragged and unevenly sampled; samples within a trajectory are in time order.
+"""
 
 
 def _version() -> str:
