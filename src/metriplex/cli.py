@@ -235,10 +235,12 @@ def cmd_rollout(args) -> None:
     from .data import Trajectories
     from .diagnostics import rollout_data
     from .integrate import scheme_from_name, step_failure
-    from .io import load, read, write
+    from .io import check_output_file, load, read, write, write_json
     from .runs import check_names
 
     out = _check_trajectory_out(args.out, args.overwrite)
+    status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
+                                    suffixes=(".json",))
     scheme = scheme_from_name(_scheme(args), solver=args.solver)
     _honour_model_dtype(args.run)
     model = load(args.run)
@@ -248,25 +250,35 @@ def cmd_rollout(args) -> None:
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
-    pieces = []
+    ids, t_out, x_out, status = [], [], [], []
     for k, T in enumerate(lengths):
+        tid = int(data.ids[k])
         stop = T if failed[k] < 0 or failed[k] >= T else int(failed[k])
+        entry = {"trajectory": tid, "status": "ok", "states": stop, "samples": int(T)}
         if stop < T:
             what = step_failure(scheme, ts[k, stop - 1], ts[k, stop])
-            print(
-                f"warning: trajectory {data.ids[k]}: {what}; writing the {stop} states computed "
-                "before it.",
-                file=sys.stderr,
-            )
-        if stop >= 2:
-            pieces.append((ts[k, :stop], xs[k, :stop]))
-    if not pieces:
+            entry.update(status="failed", failed_at_t=float(ts[k, stop]), reason=what)
+            kept = (f"writing the {stop} states computed before it" if stop >= 2 else
+                    "nothing written for it (a trajectory needs two states)")
+            print(f"warning: trajectory {tid}: {what}; {kept}.", file=sys.stderr)
+        if stop >= 2:  # the data's own trajectory id, so predictions match the truth by id
+            ids.append(np.full(stop, tid))
+            t_out.append(ts[k, :stop])
+            x_out.append(xs[k, :stop])
+        else:
+            entry["states"] = 0
+        status.append(entry)
+    if not ids:
         raise MetriplexError(
             f"no trajectory could be rolled out past its first step with the {scheme.name} "
             f"scheme (each failure is named above); nothing to write to {str(out)!r}."
         )
-    write(out, Trajectories.from_list(pieces, data.names))
-    print(f"wrote {len(pieces)} predicted trajectories to {out}")
+    write(out, Trajectories(np.concatenate(ids), np.concatenate(t_out),
+                            np.concatenate(x_out), data.names))
+    write_json(status_path, {"scheme": scheme.name, "trajectories": status})
+    n_failed = sum(e["status"] == "failed" for e in status)
+    print(f"wrote {len(ids)} predicted trajectories to {out} (data's trajectory ids; "
+          f"{n_failed} of {len(status)} failed, see {status_path})")
 
 
 def _scheme(args) -> str:
