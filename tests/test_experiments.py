@@ -2,9 +2,11 @@
 
 Each quick run must beat the untrained model of the same configuration by a wide margin in
 rollout error on unseen test initial conditions, and write its metrics and figures (PNG, PDF and
-the raw NPZ). Three run by default (about 30 s, 60 s and 110 s on a busy 2-core CPU); the
-temperature pendulum (learned L, M, E and S with a stochastic Jacobi penalty, about 160 s)
-carries the ``slow`` marker.
+the raw NPZ). These are end-to-end accuracy runs of 2 to 4 minutes each on a busy 2-core CPU, so
+all four carry the ``slow`` marker (``pytest -m slow``). The default run keeps the pipeline
+itself: ``test_experiment_pipeline_writes_everything`` runs the same ``run_experiment`` code
+(generation, training, evaluation against the untrained model and the ground truth, gauge fits,
+every figure and ``metrics.json``) at a tiny size, where it checks what is written, not accuracy.
 """
 
 import json
@@ -12,7 +14,7 @@ import math
 
 import pytest
 
-from metriplex.experiments import EXPERIMENTS, run_experiment
+from metriplex.experiments import EXPERIMENTS, Size, run_experiment
 
 # The issue's requirement for --quick: at least 5x below the untrained model's test error
 # (measured margins in docs/experiments.md).
@@ -24,9 +26,9 @@ FIGURES = ("trajectories", "error", "energy_fit", "energy_entropy", "loss")
 @pytest.mark.parametrize(
     "name",
     [
-        "pendulum-energetic",
-        "gas-containers",
-        "rigid-body",
+        pytest.param("pendulum-energetic", marks=pytest.mark.slow),
+        pytest.param("gas-containers", marks=pytest.mark.slow),
+        pytest.param("rigid-body", marks=pytest.mark.slow),
         pytest.param("pendulum-temperature", marks=pytest.mark.slow),
     ],
 )
@@ -49,3 +51,31 @@ def test_quick_experiment_learns(name, tmp_path):
     for stem in FIGURES + (("positions",) if name.startswith("pendulum") else ()):
         for ext in ("png", "pdf", "npz"):
             assert (figures / f"{stem}.{ext}").exists(), f"{stem}.{ext}"
+
+
+def test_experiment_pipeline_writes_everything(tmp_path):
+    """The whole ``run_experiment`` path at a tiny size (5 trajectories of 20 steps, 20 training
+    steps): what it writes, not how well it learns (that is ``test_quick_experiment_learns``,
+    marked slow). The energetic pendulum takes the most branches: a horizon, the
+    discrete-gradient rollout, the positions figure and the time to 10% error."""
+    name = "pendulum-energetic"
+    out = tmp_path / name
+    metrics = run_experiment(name, quick=True, out=out, progress=False,
+                             size=Size(trajectories=5, steps=20, train_steps=20,
+                                       test_trajectories=2, test_steps=20))
+    key = "rollout_error_to_horizon_mean"
+    assert math.isfinite(metrics[key]) and math.isfinite(metrics["untrained_rollout_error"])
+    assert metrics["rollout_failures"] == 0
+    assert metrics["size"]["train_steps"] == 20 and metrics["test_trajectories"] == 2
+    assert len(metrics["time_to_10pct_error"]) == 2
+    saved = json.loads((out / "metrics.json").read_text())
+    assert saved[key] == pytest.approx(metrics[key])
+    assert set(saved["bars"]) == set(EXPERIMENTS[name].bars)
+    for k in ("ground_truth_cn", "energy_gauge_fit", "energy_relative_drift_gauge_fixed",
+              "true_energy_relative_drift", "train_seconds", "untrained_rollout_error"):
+        assert k in saved, k
+    for f in ("model.mpx", "history.json", "config.json", "train_data.npz", "test_data.npz"):
+        assert (out / f).exists(), f
+    for stem in FIGURES + ("positions",):
+        for ext in ("png", "pdf", "npz"):
+            assert (out / "figures" / f"{stem}.{ext}").exists(), f"{stem}.{ext}"
