@@ -2,6 +2,7 @@
 
 import jax.random as jr
 import numpy as np
+import pytest
 
 import metriplex as mx
 from helpers import damped_oscillator, make_data, oscillator_x0
@@ -27,6 +28,10 @@ def train_and_score(data, test):
     return mx.evaluate(model, test)["rollout_error_mean"]
 
 
+# Three trainings of 1500 steps: an end-to-end accuracy run (about 3 minutes on 2 loaded cores),
+# so `-m slow`. The same training path (fit of this model and loss on oscillator data) runs by
+# default in test_train.py::test_fit_learns_damped_oscillator_far_better_than_untrained.
+@pytest.mark.slow
 def test_graceful_degradation_with_noise():
     truth = damped_oscillator()
     clean = make_data(truth, oscillator_x0(24), 0.1, 40, names=("q", "p", "s"))
