@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -86,7 +87,37 @@ def test_divergence_is_reported_and_best_model_kept():
 
 def _cli(*args, **kw):
     return subprocess.run([sys.executable, "-m", "metriplex", *args], capture_output=True,
-                          text=True, cwd=kw.get("cwd"), timeout=kw.get("timeout", 600))
+                          text=True, cwd=kw.get("cwd"), env=kw.get("env"),
+                          timeout=kw.get("timeout", 600))
+
+
+# The interrupted run: `metriplex train` whose process SIGKILLs itself right after writing the
+# checkpoint at step KILL_AT (of 1200): a real kill in mid-run (no cleanup, the lock left
+# behind, no model), at a step fixed in advance rather than after a guessed sleep.
+KILL_AT = 600
+KILLED_TRAIN = textwrap.dedent(
+    f"""
+    import os, signal, sys
+    import metriplex._checkpoint as checkpoint
+    from metriplex.cli import main
+
+    write = checkpoint.save
+
+    def write_then_die(path, tree, meta):
+        write(path, tree, meta)
+        if meta["done"] >= {KILL_AT}:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    checkpoint.save = write_then_die
+    sys.exit(main(sys.argv[1:]))
+    """
+)
+
+
+def _checkpoint_step(path) -> int:
+    with open(path, "rb") as f:
+        f.readline()  # the magic line
+        return json.loads(f.readline())["done"]
 
 
 def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
@@ -95,22 +126,20 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "1200", "--eval-every",
             "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64",
             "--quiet"]
-    full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts)
+    # The three processes compile the same programs: a compilation cache of their own (this
+    # test's folder) spares the second and third the compiling; results do not depend on it.
+    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(tmp_path / "jax-cache"),
+               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
+    full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts, env=env)
     assert full.returncode == 0, full.stderr
-    proc = subprocess.Popen([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
-                             "--out", str(tmp_path / "cut"), *opts],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    ckpt = tmp_path / "cut" / "checkpoint.ckpt"
-    deadline = time.time() + 300
-    while time.time() < deadline:
-        if ckpt.exists() and ckpt.stat().st_size > 0:
-            time.sleep(1.0)
-            break
-        time.sleep(0.2)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    cut = subprocess.run([sys.executable, "-c", KILLED_TRAIN, "train", str(tmp_path / "d.npz"),
+                          "--out", str(tmp_path / "cut"), *opts],
+                         capture_output=True, text=True, env=env, timeout=600)
+    assert cut.returncode == -signal.SIGKILL, (cut.returncode, cut.stderr)
     assert not (tmp_path / "cut" / "model.mpx").exists(), "the run finished before the kill"
-    resumed = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume", *opts)
+    assert _checkpoint_step(tmp_path / "cut" / "checkpoint.ckpt") == KILL_AT
+    resumed = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume",
+                   *opts, env=env)
     assert resumed.returncode == 0, resumed.stderr
     a = mx.load(tmp_path / "full")
     b = mx.load(tmp_path / "cut")
