@@ -1,6 +1,7 @@
 """Tests run in float64 with JAX's strict rank and dtype promotion; warnings are errors."""
 
 import os
+import time
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
 
@@ -13,3 +14,35 @@ jax.config.update("jax_numpy_dtype_promotion", "strict")
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+
+#: Entries of the compilation cache older than this are deleted at the start of a run.
+COMPILATION_CACHE_DAYS = 3
+
+
+def pytest_configure(config):
+    """Keep XLA's compiled programs between runs in pytest's cache folder
+    (``.pytest_cache/d/jax-compilation-cache``; none with ``-p no:cacheprovider``).
+
+    Compiling is most of the suite's time, and a test compiles the same programs on every run.
+    A cache hit returns the executable that compiling the same program gives, so no result
+    depends on the cache, nor on which tests ran before. Both xdist workers share it, and so do
+    the processes that tests start (through the environment; the benchmark test removes it, as
+    it times compilation). An entry read while another process writes it is a miss (see the
+    warning filters in pyproject.toml).
+    """
+    cache = getattr(config, "cache", None)
+    if cache is None:
+        return
+    folder = cache.mkdir("jax-compilation-cache")
+    if not hasattr(config, "workerinput"):  # the controller, before any worker starts
+        too_old = time.time() - COMPILATION_CACHE_DAYS * 86400
+        for entry in folder.iterdir():
+            try:
+                if entry.stat().st_mtime < too_old:
+                    entry.unlink()
+            except OSError:
+                pass
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = str(folder)
+    os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"

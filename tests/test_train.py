@@ -126,10 +126,13 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "1200", "--eval-every",
             "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64",
             "--quiet"]
-    # The three processes compile the same programs: a compilation cache of their own (this
-    # test's folder) spares the second and third the compiling; results do not depend on it.
-    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(tmp_path / "jax-cache"),
-               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
+    # The three processes compile the same programs: a compilation cache (the suite's, see
+    # conftest.py, else one in this test's folder) spares the second and third the compiling;
+    # results do not depend on it.
+    env = dict(os.environ)
+    if "JAX_COMPILATION_CACHE_DIR" not in env:
+        env.update(JAX_COMPILATION_CACHE_DIR=str(tmp_path / "jax-cache"),
+                   JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
     full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts, env=env)
     assert full.returncode == 0, full.stderr
     cut = subprocess.run([sys.executable, "-c", KILLED_TRAIN, "train", str(tmp_path / "d.npz"),
