@@ -1,3 +1,4 @@
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -14,15 +15,21 @@ def _batch(data):
     return Batch(jnp.asarray(p.x0), jnp.asarray(p.x1), jnp.asarray(p.dt), jnp.ones(data.n))
 
 
+def _compiled(loss):
+    """``loss(model, batch)`` as one compiled program: evaluated op by op, a loss with nested
+    derivatives compiles each of its many small operations separately (seconds each test)."""
+    return eqx.filter_jit(lambda model, batch: loss(model, batch))
+
+
 @pytest.mark.parametrize("system,x0", [(rigid_body, rigid_x0(3)), (damped_oscillator, oscillator_x0(3))])
 def test_loss_is_zero_on_data_made_by_the_same_scheme(system, x0):
     model = system()
     data = make_data(model, x0, 0.1, 50)
     loss = mx.CrankNicolsonResidual() + 10.0 * mx.DegeneracyPenalty() + mx.JacobiPenalty("exact")
-    total, parts = loss(model, _batch(data))
+    total, parts = _compiled(loss)(model, _batch(data))
     assert float(total) < 1e-20, parts
     # ... and clearly not zero for another scheme's residual on the same data
-    total_mid, _ = mx.MidpointResidual().as_loss()(model, _batch(data))
+    total_mid, _ = _compiled(mx.MidpointResidual().as_loss())(model, _batch(data))
     assert float(total_mid) > 1e3 * max(float(total), 1e-30)
 
 
@@ -31,7 +38,7 @@ def test_loss_with_nonuniform_dt():
     ts = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(0.02, 0.2, 40)])
     xs = mx.simulate(model, jnp.asarray(oscillator_x0(2)), jnp.asarray(ts))
     data = mx.Trajectories.from_arrays(ts, np.asarray(xs))
-    total, _ = mx.CrankNicolsonResidual().as_loss()(model, _batch(data))
+    total, _ = _compiled(mx.CrankNicolsonResidual().as_loss())(model, _batch(data))
     assert float(total) < 1e-20
 
 
@@ -52,7 +59,7 @@ def test_degeneracy_penalty_detects_violation():
                             mx.SkewMLPPoisson(3, width=8, key=k[2]),
                             mx.CholeskyFriction(3, width=8, key=k[3]))
     data = make_data(damped_oscillator(), oscillator_x0(2), 0.1, 10)
-    _, parts = mx.DegeneracyPenalty()(model, _batch(data))
+    _, parts = _compiled(mx.DegeneracyPenalty())(model, _batch(data))
     assert float(parts["degeneracy_L"]) > 1e-8 and float(parts["degeneracy_M"]) > 1e-10
 
 
@@ -61,7 +68,8 @@ def test_stochastic_jacobi_is_unbiased():
                             mx.SkewMLPPoisson(5, width=16, key=jr.key(2)), mx.ZeroFriction(5))
     x = jr.normal(jr.key(1), (4, 5))
     b = Batch(x, x, jnp.ones(4), jnp.ones(5))
-    exact = float(mx.JacobiPenalty("exact")(model, b, None, jr.key(0)))
+    exact = float(eqx.filter_jit(lambda m, b: mx.JacobiPenalty("exact")(m, b, None, jr.key(0)))(
+        model, b))
     est = mx.JacobiPenalty("stochastic", probes=8)
     draws = np.asarray(jax.jit(jax.vmap(lambda k: est(model, b, None, k)))(jr.split(jr.key(3), 200)))
     se = draws.std(ddof=1) / np.sqrt(len(draws))
@@ -101,24 +109,30 @@ def test_midpoint_penalties_and_shared_midpoint_terms(exact):
     x0 = jr.normal(jr.key(6), (B, n))
     x1 = x0 + 0.1 * jr.normal(jr.key(7), (B, n))
     batch = Batch(x0, x1, jnp.full((B,), 0.1), jnp.asarray([1.0, 2.0, 0.5, 1.5]))
+    dg = mx.DiscreteGradient()
+
+    @eqx.filter_jit  # one program, not the many small ones of op-by-op evaluation
+    def values(model, batch):
+        x0, x1 = batch.x0, batch.x1
+        t = jax.vmap(model.terms)(0.5 * (x0 + x1))
+        _, at_midpoints = mx.FrictionDegeneracy(where="midpoints").as_loss()(model, batch)
+        _, at_states = mx.FrictionDegeneracy().as_loss()(model, batch)
+        t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
+        own = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, batch.dt, t0, t1)
+        shared = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(
+            model, x0, x1, batch.dt, t0, t1, t)
+        return t, at_midpoints["degeneracy_M"], at_states["degeneracy_M"], own, shared
+
+    t, at_midpoints, at_states, own, shared = values(model, batch)
     # The midpoint penalty is the defect at (x0 + x1)/2, once per pair.
-    xm = 0.5 * (x0 + x1)
-    t = jax.vmap(model.terms)(xm)
     want = np.mean(np.sum((np.einsum("bij,bj->bi", t.friction, t.grad_energy)
                            / np.asarray(batch.scale)) ** 2, axis=-1))
-    _, parts = mx.FrictionDegeneracy(where="midpoints").as_loss()(model, batch)
     # (Projected blocks are degenerate by construction: both sides are rounding, ~1e-39.)
-    np.testing.assert_allclose(float(parts["degeneracy_M"]), want, rtol=1e-12, atol=1e-30)
+    np.testing.assert_allclose(float(at_midpoints), want, rtol=1e-12, atol=1e-30)
     if not exact:
-        _, parts = mx.FrictionDegeneracy().as_loss()(model, batch)  # at the states: different
-        assert abs(float(parts["degeneracy_M"]) - want) > 1e-6 * want
+        assert abs(float(at_states) - want) > 1e-6 * want  # at the states: different
     # The discrete-gradient residual gives the same value whether it takes the midpoint terms
     # from the shared context (and reuses L, M of blocks that ignore the gradient) or not.
-    dg = mx.DiscreteGradient()
-    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
-    own = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, batch.dt, t0, t1)
-    shared = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(
-        model, x0, x1, batch.dt, t0, t1, t)
     np.testing.assert_allclose(np.asarray(shared), np.asarray(own), rtol=1e-12, atol=1e-14)
     with pytest.raises(mx.MetriplexError, match="'states' .* or 'midpoints'"):
         mx.PoissonDegeneracy(where="edges")
