@@ -252,14 +252,19 @@ def test_jacobi_penalty_on_a_subset_of_the_batch():
                             SkewMLPPoisson(n, width=16, key=jr.key(23)), ZeroFriction(n))
     xs = _states(n, 8, 24)
     scale = jnp.ones((n,))
-    per_state = [float(JacobiPenalty("exact")(model, Batch(xs[i:i + 1], xs[i:i + 1],
-                                                           jnp.ones((1,)), scale), None, None))
+
+    def penalty(samples=None):  # compiled once per setting and shape, not op by op
+        kw = {} if samples is None else {"samples": samples}
+        return eqx.filter_jit(lambda m, b: JacobiPenalty("exact", **kw)(m, b, None, None))
+
+    one = penalty()
+    per_state = [float(one(model, Batch(xs[i:i + 1], xs[i:i + 1], jnp.ones((1,)), scale)))
                  for i in range(8)]
     batch = Batch(xs, xs, jnp.ones((8,)), scale)
     # samples=2 of 8: every 4th pair, i.e. pairs 0 and 4.
-    sub = float(JacobiPenalty("exact", samples=2)(model, batch, None, None))
+    sub = float(penalty(2)(model, batch))
     np.testing.assert_allclose(sub, 0.5 * (per_state[0] + per_state[4]), rtol=1e-12)
-    full = float(JacobiPenalty("exact", samples=100)(model, batch, None, None))
+    full = float(penalty(100)(model, batch))
     np.testing.assert_allclose(full, np.mean(per_state), rtol=1e-12)
     with pytest.raises(mx.MetriplexError, match="samples must be >= 1"):
         JacobiPenalty("exact", samples=0)
@@ -322,17 +327,21 @@ def test_save_load_round_trip(tmp_path):
         pred = _predict(model, n)
         assert np.array_equal(pred, _predict(back, n))
         expected[name] = (str(path), n, pred)
-    # A fresh process rebuilds every model from the file alone, bit for bit.
+    # A fresh process rebuilds every model from the file alone, bit for bit. (Its `_fields` is
+    # the one above, so with the suite's compilation cache it reuses what this process
+    # compiled: the weights are arguments of that program, read from the files.)
     script = (
         "import sys, json, numpy as np, jax\n"
         "jax.config.update('jax_enable_x64', True)\n"
         "import equinox as eqx, jax.random as jr, metriplex as mx\n"
+        "@eqx.filter_jit\n"
+        "def _fields(model, xs):\n"
+        "    return jax.vmap(model.vector_field)(xs)\n"
         "out = {}\n"
         "for name, (path, n) in json.loads(sys.argv[1]).items():\n"
         "    m = mx.load(path)\n"
         "    x = jr.normal(jr.key(40), (32, n))\n"
-        "    f = eqx.filter_jit(lambda m, x: jax.vmap(m.vector_field)(x))\n"
-        "    out[name] = np.asarray(f(m, x))\n"
+        "    out[name] = np.asarray(_fields(m, x))\n"
         "np.savez(sys.argv[2], **out)\n"
     )
     arg = json.dumps({k: [v[0], v[1]] for k, v in expected.items()})
