@@ -97,6 +97,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    f"(default {d.lr_cuts})")
     w.add_argument("--schedule", choices=sorted(SCHEDULES), help="learning-rate schedule: "
                    + "; ".join(f"{k}: {v}" for k, v in SCHEDULES.items()).replace("%", "%%"))
+    w.add_argument("--lbfgs-steps", type=int, help="iterations of an L-BFGS finish on a fixed "
+                   "batch of up to 8192 training pairs after the Adam stage, kept only where "
+                   f"the held-out rollouts improve (default {d.lbfgs_steps}; 0 for none)")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")

@@ -81,6 +81,7 @@ class RunConfig:
     float64: bool = False
     checkpoint_every: int = 10
     data_parallel: bool = False
+    lbfgs_steps: int = 0
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -196,6 +197,11 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
+    if config.lbfgs_steps < 0:
+        raise MetriplexError(
+            f"--lbfgs-steps must be >= 0 (iterations of the L-BFGS finish; 0 for none); got "
+            f"{config.lbfgs_steps}."
+        )
     if config.schedule not in SCHEDULES:
         raise MetriplexError(
             f"--schedule must be one of {', '.join(SCHEDULES)}; got {config.schedule!r}. "

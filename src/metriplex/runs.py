@@ -133,6 +133,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress):
             checkpoint_every=config.checkpoint_every,
             resume=resume,
             data_parallel=config.data_parallel,
+            lbfgs_steps=config.lbfgs_steps,
             key=fit_key,
         )
     except TrainingDiverged as e:

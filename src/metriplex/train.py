@@ -31,6 +31,7 @@ from ._train import (
     is_adjustable,
     learning_rate_of,
     make_chunk,
+    make_lbfgs_chunk,
     with_learning_rate,
 )
 from .data import Pairs, Trajectories, state_scale, time_scale
@@ -232,6 +233,8 @@ def fit(
     checkpoint_every: int = 10,
     resume: bool = False,
     data_parallel: bool = False,
+    lbfgs_steps: int = 0,
+    lbfgs_pairs: int = 8192,
     key,
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
@@ -292,6 +295,11 @@ def fit(
         all-reduce. The result equals single-device training to rounding. ``batch_size`` must be
         a multiple of the device count. Across hosts, call ``jax.distributed.initialize()``
         first (see docs/performance.md).
+    lbfgs_steps:
+        Iterations of an L-BFGS finish (:func:`optax.lbfgs`) after the Adam stage, on the loss
+        of up to ``lbfgs_pairs`` fixed training pairs (evenly spread), evaluated every
+        ``eval_every`` iterations; its model is kept only where the validation score improves.
+        0 (default) for none.
 
     ```python
     model, history = fit(model, data, key=jr.key(0))
@@ -306,6 +314,11 @@ def fit(
         raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
     if patience is not None and patience < 1:
         raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
+    if lbfgs_steps < 0 or lbfgs_pairs < 1:
+        raise MetriplexError(
+            f"need lbfgs_steps >= 0 and lbfgs_pairs >= 1; got lbfgs_steps={lbfgs_steps}, "
+            f"lbfgs_pairs={lbfgs_pairs}."
+        )
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
@@ -490,6 +503,43 @@ def fit(
             state.opt_state = with_learning_rate(state.opt_state, state.lr)
         return False
 
+    def lbfgs_finish():
+        """L-BFGS from the best model on a fixed batch; evaluations keep the best model."""
+        nonlocal bar
+        solver, chunk = make_lbfgs_chunk(loss, static)
+        chunk = eqx.filter_jit(chunk)
+        m = len(train_pairs)
+        idx = (np.arange(m) if m <= lbfgs_pairs
+               else np.linspace(0, m - 1, lbfgs_pairs).astype(int))
+        pairs = _batch(train_pairs, idx, scale, dtype)
+        state.params = state.best_params
+        opt_state = solver.init(state.params)
+        bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",
+                   leave=False)
+        done = 0
+        try:
+            while done < lbfgs_steps:
+                length = min(eval_every, lbfgs_steps - done)
+                params, opt_state, value = chunk(state.params, opt_state, length, pairs,
+                                                 eval_key)
+                if not math.isfinite(float(value)):
+                    history.stopped += f"; L-BFGS stopped at iteration {done} (non-finite loss)"
+                    break
+                state.params = params
+                done += length
+                state.done += length
+                bar.update(length)
+                state.train_value, state.train_parts = eval_pairs(state.params, train_pairs,
+                                                                  eval_key)
+                record_evaluation()
+                if max_seconds is not None and history.time[-1] >= max_seconds:
+                    break
+        except KeyboardInterrupt:
+            history.stopped += f"; L-BFGS interrupted at iteration {done}"
+        finally:
+            bar.close()
+            history.lbfgs_steps = done
+
     start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
     evaluations = 0
     bar = tqdm(total=steps, initial=state.done, disable=not progress, desc="fit", unit="step",
@@ -511,5 +561,8 @@ def fit(
         history.stopped = f"interrupted at step {state.done}"
     finally:
         bar.close()
+    if (lbfgs_steps and not history.stopped.startswith("interrupted")
+            and history.lbfgs_steps == 0):
+        lbfgs_finish()
     save_checkpoint()
     return eqx.combine(state.best_params, static), history
