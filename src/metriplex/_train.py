@@ -19,9 +19,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
+import numpy as np
 import optax
 
 from . import _checkpoint
+from ._errors import MetriplexError
+from .data import Pairs, Trajectories
 from .losses import Batch, Loss
 
 
@@ -86,6 +89,13 @@ def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransfo
     fixed number of steps)."""
     return optax.chain(optax.clip_by_global_norm(10.0),
                        optax.adam(cosine_schedule(learning_rate, steps)))
+
+
+def annealing(step: int, start: int, end: int) -> float:
+    """The factor on the learning rate at ``step`` of a cosine annealing to 1% between
+    ``start`` and ``end`` (1 before ``start``)."""
+    frac = min(max((step - start) / max(end - start, 1), 0.0), 1.0)
+    return 0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))
 
 
 def _rate_state(opt_state):
@@ -244,3 +254,78 @@ class TrainState:
             since_best=meta["since_best"], cuts=meta["cuts"], train_value=meta["train_value"],
             train_parts=meta["train_parts"], history=History.from_json(meta["history"]),
         )
+
+
+def as_pairs(data) -> tuple[Pairs, Trajectories | None]:
+    if isinstance(data, Trajectories):
+        return data.pairs(), data
+    if isinstance(data, Pairs):
+        return data, None
+    if isinstance(data, tuple) and len(data) == 3:
+        return Pairs(*(np.asarray(a) for a in data)), None
+    raise MetriplexError(
+        f"fit needs Trajectories, Pairs or a tuple (x0, x1, dt); got {type(data).__name__}."
+    )
+
+
+def check_pairs(p: Pairs, n: int | None, what: str) -> None:
+    if p.x0.ndim != 2 or p.x0.shape != p.x1.shape or p.dt.shape != p.x0.shape[:1]:
+        raise MetriplexError(
+            f"{what} pairs need x0, x1 of shape (N, n) and dt of shape (N,); got "
+            f"{p.x0.shape}, {p.x1.shape}, {p.dt.shape}."
+        )
+    if len(p) == 0:
+        raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
+    if n is not None and p.x0.shape[1] != n:
+        raise MetriplexError(
+            f"the data have {p.x0.shape[1]} state variables but the model expects {n}; build the "
+            f"model for {p.x0.shape[1]} variables or select matching columns."
+        )
+    if np.any(~np.isfinite(p.dt)) or np.any(p.dt <= 0):
+        raise MetriplexError(
+            f"every dt must be finite and > 0; {what} data have dt = "
+            f"{p.dt[(~np.isfinite(p.dt)) | (p.dt <= 0)][:3]}. Sort samples by time and drop "
+            "duplicates."
+        )
+    for a in (p.x0, p.x1):
+        if not np.all(np.isfinite(a)):
+            raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
+
+
+def spread(m: int, k: int) -> np.ndarray:
+    """Indices of all ``m`` items when ``m <= k``, else of ``k`` evenly spread ones (a fixed
+    subset: one compiled shape, the same items at every evaluation)."""
+    return np.arange(m) if m <= k else np.linspace(0, m - 1, k).astype(int)
+
+
+def to_batch(pairs: Pairs, idx, scale, dtype) -> Batch:
+    return Batch(
+        jnp.asarray(pairs.x0[idx], dtype),
+        jnp.asarray(pairs.x1[idx], dtype),
+        jnp.asarray(pairs.dt[idx], dtype),
+        jnp.asarray(scale, dtype),
+    )
+
+
+def batch_sharding(enabled: bool, batch_size: int):
+    """A function that shards a batch's sample axis over all local devices, or ``None``."""
+    if not enabled:
+        return None
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+    devices = jax.devices()
+    if batch_size % len(devices):
+        raise MetriplexError(
+            f"data-parallel training splits each batch over {len(devices)} devices, so the batch "
+            f"size must be a multiple of {len(devices)}; got {batch_size}. Choose "
+            f"--batch-size {batch_size - batch_size % len(devices) or len(devices)}."
+        )
+    mesh = Mesh(np.array(devices), ("data",))
+    rows = NamedSharding(mesh, P("data"))
+    whole = NamedSharding(mesh, P())
+
+    def shard(batch: Batch) -> Batch:
+        c = jax.lax.with_sharding_constraint
+        return Batch(c(batch.x0, rows), c(batch.x1, rows), c(batch.dt, rows), c(batch.scale, whole))
+
+    return shard

@@ -13,7 +13,6 @@ import math
 import time
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -26,187 +25,27 @@ from ._train import (
     History,
     TrainState,
     adjustable_optimizer,
+    annealing,
     cosine_schedule,
     default_optimizer,
     is_adjustable,
     learning_rate_of,
     make_chunk,
+    as_pairs,
+    batch_sharding,
+    check_pairs,
     make_lbfgs_chunk,
+    spread,
+    to_batch,
     with_learning_rate,
 )
+from ._validate import Plateau, RolloutCheck, rollout_score, scheme_of
 from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
-from .losses import Batch, CrankNicolsonResidual, Loss
+from .losses import CrankNicolsonResidual, Loss
 
 __all__ = ["History", "Plateau", "RolloutCheck", "adjustable_optimizer", "default_optimizer",
            "fit"]
-
-
-@dataclasses.dataclass(frozen=True)
-class Plateau:
-    r"""When :func:`fit` cuts the learning rate and when it stops: the default schedule.
-
-    Every evaluation compares the validation score (the held-out rollout error when validation
-    trajectories are rolled out, else the validation loss) with the best so far. After
-    ``patience`` evaluations without a relative improvement of ``min_delta``, the learning rate
-    is multiplied by ``factor`` and training goes on from the best model; after ``cuts`` such
-    plateaus training stops (*converged*). ``fit``'s ``steps`` stays a cap.
-
-    ```python
-    model, history = fit(model, data, steps=50_000, stopping=Plateau(patience=5), key=key)
-    ```
-    """
-
-    patience: int = 20
-    factor: float = 0.3
-    cuts: int = 3
-    min_delta: float = 1e-3
-
-    def __post_init__(self):
-        if self.patience < 1 or not 0.0 < self.factor < 1.0 or self.cuts < 0:
-            raise MetriplexError(
-                f"Plateau needs patience >= 1, 0 < factor < 1 and cuts >= 0; got "
-                f"patience={self.patience}, factor={self.factor}, cuts={self.cuts}."
-            )
-        if not 0.0 <= self.min_delta < 1.0:
-            raise MetriplexError(
-                f"Plateau.min_delta is a relative improvement in [0, 1); got {self.min_delta}."
-            )
-
-
-@dataclasses.dataclass(frozen=True)
-class RolloutCheck:
-    r"""Judge each evaluation by rolling the model out on held-out trajectories.
-
-    From the first state of up to ``trajectories`` validation trajectories, for at most
-    ``steps`` steps of their own time grid, with the training scheme. The score is the mean
-    over trajectories of the RMS error in units of each variable's standard deviation; a
-    rollout that fails scores :math:`10^3` plus the fraction of steps it missed, so any
-    complete rollout beats any failed one. :func:`fit` keeps the model with the best score.
-    """
-
-    steps: int = 200
-    trajectories: int = 16
-
-    def __post_init__(self):
-        if self.steps < 1 or self.trajectories < 1:
-            raise MetriplexError(
-                f"RolloutCheck needs steps >= 1 and trajectories >= 1; got steps={self.steps}, "
-                f"trajectories={self.trajectories}."
-            )
-
-    def prepare(self, valid: Trajectories, dtype):
-        """The padded windows ``(ts, xs, mask)`` that every check rolls out."""
-        ids = valid.ids[: self.trajectories]
-        ts, xs, lengths = valid.select(ids).padded()
-        T = min(self.steps + 1, ts.shape[1])
-        ts, xs = ts[:, :T], xs[:, :T]
-        mask = np.arange(T)[None, :] < np.minimum(lengths, T)[:, None]
-        return jnp.asarray(ts, dtype), jnp.asarray(xs, dtype), mask
-
-
-FAILED_ROLLOUT_SCORE = 1e3
-
-
-def rollout_score(model, scheme, windows, scale) -> tuple[float, int]:
-    """``(score, failures)`` of :class:`RolloutCheck` for prepared ``windows``."""
-    from .integrate import solve
-
-    ts, xs, mask = windows
-    out = solve(model, xs[:, 0], ts, scheme=scheme)
-    pred = np.asarray(out.xs, np.float64)
-    obs = np.asarray(xs, np.float64)
-    err = np.sum(((pred - obs) / np.asarray(scale)[None, None, :]) ** 2, axis=-1) / obs.shape[-1]
-    failed = np.asarray(out.failed_step) >= 0
-    scores = []
-    for k in range(obs.shape[0]):
-        m = mask[k]
-        if failed[k] or not np.all(np.isfinite(err[k][m])):
-            first = int(out.failed_step[k]) if failed[k] else 0
-            scores.append(FAILED_ROLLOUT_SCORE + 1.0 - first / max(int(m.sum()), 1))
-        else:
-            scores.append(float(np.sqrt(np.mean(err[k][m]))))
-    return float(np.mean(scores)), int(np.sum(failed))
-
-
-def _as_pairs(data) -> tuple[Pairs, Trajectories | None]:
-    if isinstance(data, Trajectories):
-        return data.pairs(), data
-    if isinstance(data, Pairs):
-        return data, None
-    if isinstance(data, tuple) and len(data) == 3:
-        return Pairs(*(np.asarray(a) for a in data)), None
-    raise MetriplexError(
-        f"fit needs Trajectories, Pairs or a tuple (x0, x1, dt); got {type(data).__name__}."
-    )
-
-
-def _check_pairs(p: Pairs, n: int | None, what: str) -> None:
-    if p.x0.ndim != 2 or p.x0.shape != p.x1.shape or p.dt.shape != p.x0.shape[:1]:
-        raise MetriplexError(
-            f"{what} pairs need x0, x1 of shape (N, n) and dt of shape (N,); got "
-            f"{p.x0.shape}, {p.x1.shape}, {p.dt.shape}."
-        )
-    if len(p) == 0:
-        raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
-    if n is not None and p.x0.shape[1] != n:
-        raise MetriplexError(
-            f"the data have {p.x0.shape[1]} state variables but the model expects {n}; build the "
-            f"model for {p.x0.shape[1]} variables or select matching columns."
-        )
-    if np.any(~np.isfinite(p.dt)) or np.any(p.dt <= 0):
-        raise MetriplexError(
-            f"every dt must be finite and > 0; {what} data have dt = "
-            f"{p.dt[(~np.isfinite(p.dt)) | (p.dt <= 0)][:3]}. Sort samples by time and drop "
-            "duplicates."
-        )
-    for a in (p.x0, p.x1):
-        if not np.all(np.isfinite(a)):
-            raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
-
-
-def _batch(pairs: Pairs, idx, scale, dtype) -> Batch:
-    return Batch(
-        jnp.asarray(pairs.x0[idx], dtype),
-        jnp.asarray(pairs.x1[idx], dtype),
-        jnp.asarray(pairs.dt[idx], dtype),
-        jnp.asarray(scale, dtype),
-    )
-
-
-def _batch_sharding(enabled: bool, batch_size: int):
-    """A function that shards a batch's sample axis over all local devices, or ``None``."""
-    if not enabled:
-        return None
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-
-    devices = jax.devices()
-    if batch_size % len(devices):
-        raise MetriplexError(
-            f"data-parallel training splits each batch over {len(devices)} devices, so the batch "
-            f"size must be a multiple of {len(devices)}; got {batch_size}. Choose "
-            f"--batch-size {batch_size - batch_size % len(devices) or len(devices)}."
-        )
-    mesh = Mesh(np.array(devices), ("data",))
-    rows = NamedSharding(mesh, P("data"))
-    whole = NamedSharding(mesh, P())
-
-    def shard(batch: Batch) -> Batch:
-        c = jax.lax.with_sharding_constraint
-        return Batch(c(batch.x0, rows), c(batch.x1, rows), c(batch.dt, rows), c(batch.scale, whole))
-
-    return shard
-
-
-def _scheme_of(loss: Loss):
-    """The scheme of the loss's residual term (Crank–Nicolson if it has none)."""
-    from .integrate import CrankNicolson
-    from .losses import SchemeResidual
-
-    for term in loss.terms:
-        if isinstance(term, SchemeResidual):
-            return term.scheme
-    return CrankNicolson()
 
 
 def fit(
@@ -330,13 +169,13 @@ def fit(
         train_pairs = train_data.pairs()
         valid_pairs = None if valid_data is None else valid_data.pairs()
     else:
-        train_pairs, _ = _as_pairs(data)
+        train_pairs, _ = as_pairs(data)
         if isinstance(validation, Trajectories):
             valid_data = validation
             valid_pairs = validation.pairs()
-    _check_pairs(train_pairs, n, "training")
+    check_pairs(train_pairs, n, "training")
     if valid_pairs is not None:
-        _check_pairs(valid_pairs, n, "validation")
+        check_pairs(valid_pairs, n, "validation")
     if dtype is None:
         dtype = float_dtype(model, default=jnp.float32)
     if scale is None:
@@ -356,29 +195,23 @@ def fit(
     adjustable = stopping is not None and is_adjustable(opt_state)
     n_train = len(train_pairs)
     bsz = min(batch_size, n_train)
-    shard = _batch_sharding(data_parallel, bsz)
-    full_train = _batch(train_pairs, np.arange(n_train), scale, dtype)
+    shard = batch_sharding(data_parallel, bsz)
+    full_train = to_batch(train_pairs, np.arange(n_train), scale, dtype)
     run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard))
 
     @eqx.filter_jit
     def evaluate(params, batch, key):
         return loss(eqx.combine(params, static), batch, key=key)
 
-    eval_size = 4096
-
     def eval_pairs(params, pairs: Pairs, key) -> tuple[float, dict[str, float]]:
-        m = len(pairs)
-        if m <= eval_size:
-            idx = np.arange(m)
-        else:  # a fixed, evenly spread subset: one compiled shape, a stable signal
-            idx = np.linspace(0, m - 1, eval_size).astype(int)
-        total, parts = evaluate(params, _batch(pairs, idx, scale, dtype), key)
+        idx = spread(len(pairs), 4096)  # one compiled shape, a stable signal
+        total, parts = evaluate(params, to_batch(pairs, idx, scale, dtype), key)
         return float(total), {k: float(v) for k, v in parts.items()}
 
     windows = None
     if rollout_check is not None and valid_data is not None:
         windows = rollout_check.prepare(valid_data, dtype)
-        scheme = _scheme_of(loss)
+        scheme = scheme_of(loss)
         state_units = state_scale(np.concatenate([train_pairs.x0, valid_data.x]))
 
     key, eval_key = jr.split(key)
@@ -407,10 +240,8 @@ def fit(
     def run_next_chunk():
         length = min(eval_every, steps - state.done)
         if adjustable and state.done >= anneal_from:
-            frac = (state.done - anneal_from) / max(steps - anneal_from, 1)
             state.opt_state = with_learning_rate(
-                state.opt_state,
-                state.lr * (0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))))
+                state.opt_state, state.lr * annealing(state.done, anneal_from, steps))
         state.key, sub = jr.split(state.key)
         state.params, state.opt_state, value, parts = run_chunk(
             state.params, state.opt_state, sub, length, full_train)
@@ -508,10 +339,7 @@ def fit(
         nonlocal bar
         solver, chunk = make_lbfgs_chunk(loss, static)
         chunk = eqx.filter_jit(chunk)
-        m = len(train_pairs)
-        idx = (np.arange(m) if m <= lbfgs_pairs
-               else np.linspace(0, m - 1, lbfgs_pairs).astype(int))
-        pairs = _batch(train_pairs, idx, scale, dtype)
+        pairs = to_batch(train_pairs, spread(len(train_pairs), lbfgs_pairs), scale, dtype)
         state.params = state.best_params
         opt_state = solver.init(state.params)
         bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",
