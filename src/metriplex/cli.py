@@ -216,7 +216,8 @@ def cmd_train(args) -> None:
             progress=not args.quiet,
         )
         target = valid if valid is not None else train
-        metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures")
+        metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
+                               progress=not args.quiet)
         metrics["train_seconds"] = seconds
         metrics["evaluated_on"] = ("validation trajectories" if valid is not None
                                    else "training data")
@@ -249,7 +250,7 @@ def cmd_rollout(args) -> None:
     model = load(args.run)
     data = read(args.data)
     check_names(args.run, data)
-    result, _, lengths = rollout_data(model, data, scheme=scheme)
+    result, _, lengths = rollout_data(model, data, scheme=scheme, progress=not args.quiet)
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
@@ -321,7 +322,7 @@ def cmd_evaluate(args) -> None:
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
-                           solver=args.solver)
+                           solver=args.solver, progress=not args.quiet)
     if not args.no_verdict:
         from .runs import run_config, training_outcome
         from .verdict import verdict
@@ -332,7 +333,7 @@ def cmd_evaluate(args) -> None:
             model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],
             width=cfg.get("width", 64), depth=cfg.get("depth", 2),
             steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
-            batch_size=cfg.get("batch_size", 256), progress=False,
+            batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
         )
         print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
     if args.out:
@@ -402,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "gas-containers")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     _add_structure_options(p)
     p.set_defaults(func=cmd_train)
 
@@ -418,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_rollout)
 
     p = sub.add_parser("evaluate", help="metrics (and figures) of a trained model on DATA",
@@ -444,6 +446,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "consistent, 3 cannot tell (2 stays bad input); the outcome is also "
                    "`verdict.outcome` in the --out JSON")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser("reproduce", help="run a reference experiment end to end, with figures")

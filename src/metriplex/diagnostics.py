@@ -25,20 +25,49 @@ import numpy as np
 
 from ._model import GenericModel, float_dtype
 from .data import Trajectories, state_scale
-from .integrate import AbstractScheme, CrankNicolson, solve
+from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 
 _TINY = 1e-300
 
+#: Data of up to this many states (trajectories x samples) are rolled out in one compiled call;
+#: larger data in :data:`ROLLOUT_BATCHES` equal batches of trajectories (compiled once), each a
+#: step of the progress bar.
+ROLLOUT_BATCH_STATES = 50_000
+ROLLOUT_BATCHES = 10
 
-def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractScheme | None = None):
+
+def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractScheme | None = None,
+                 progress: bool = False):
     """Roll ``model`` out from each trajectory's first state on its own grid (ragged-safe).
 
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
+    Data of more than :data:`ROLLOUT_BATCH_STATES` states are rolled out in
+    :data:`ROLLOUT_BATCHES` batches of trajectories (all of one shape, so compiled once), with a
+    progress bar when ``progress``; the results are those of one call.
     """
     ts, xs, lengths = data.padded()
     dtype = float_dtype(model)
-    out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme)
-    return out, xs, lengths
+    K, T = ts.shape
+    size = K if K * T <= ROLLOUT_BATCH_STATES else -(-K // max(1, ROLLOUT_BATCHES))
+    if size >= K:
+        out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme)
+        return out, xs, lengths
+    from tqdm.auto import tqdm
+
+    parts = []
+    with tqdm(total=K, disable=not progress, desc="rollouts", unit="trajectory",
+              leave=False) as bar:
+        for a in range(0, K, size):
+            b = min(a + size, K)
+            x0, grid = xs[a:b, 0], ts[a:b]
+            if b - a < size:  # pad the last batch with trajectories that never move
+                pad = size - (b - a)
+                x0 = np.concatenate([x0, np.repeat(x0[-1:], pad, axis=0)])
+                grid = np.concatenate([grid, np.full((pad, T), grid[-1, 0])])
+            out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme)
+            parts.append([np.asarray(v)[: b - a] for v in out])
+            bar.update(b - a)
+    return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths
 
 
 def _potential_along(model, fn, xs):
@@ -161,10 +190,14 @@ def evaluate(
     *,
     scheme: AbstractScheme | None = None,
     horizon: float | None = None,
+    rollout=None,
+    progress: bool = False,
 ) -> dict[str, Any]:
     """Metrics of ``model`` on ``data`` (see the module docstring); a JSON-able dict.
 
     ``horizon``: also report the rollout error up to ``t0 + horizon`` (``error_to_horizon``).
+    ``rollout``: what :func:`rollout_data` returned for this model, data and scheme, to reuse
+    (otherwise the trajectories are rolled out here, with a progress bar when ``progress``).
 
     ```python
     report = mx.evaluate(model, data)
@@ -172,7 +205,9 @@ def evaluate(
     ```
     """
     scheme = CrankNicolson() if scheme is None else scheme
-    out, xs, lengths = rollout_data(model, data, scheme=scheme)
+    if rollout is None:
+        rollout = rollout_data(model, data, scheme=scheme, progress=progress)
+    out, xs, lengths = rollout
     pred = np.asarray(out.xs, dtype=np.float64)
     ts = np.asarray(out.ts, dtype=np.float64)
     failed = np.asarray(out.failed_step)
@@ -224,6 +259,8 @@ def evaluate(
     no_steps = f"no rollout ran two steps ({failures})"
     report: dict[str, Any] = {
         "trajectories": int(len(lengths)),
+        # The data's ids, in the order of every per-trajectory list below.
+        "trajectory_ids": [int(i) for i in data.ids],
         "variables": list(data.names),
         "scheme": scheme.name,
         # A failed rollout's error is inf here and null in a JSON file.

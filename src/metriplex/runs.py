@@ -213,24 +213,30 @@ def check_names(run_dir, data: Trajectories) -> None:
 
 
 def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path | None = None,
-                 horizon: float | None = None, solver: str | None = None) -> dict:
-    """Metrics on ``data`` and, if ``figures`` is given, the standard figure set."""
+                 horizon: float | None = None, solver: str | None = None,
+                 progress: bool = False) -> dict:
+    """Metrics on ``data`` and, if ``figures`` is given, the standard figure set; the
+    trajectories are rolled out once for both (with a progress bar when ``progress`` and the
+    data are large enough to be rolled out in batches)."""
     sch = scheme_from_name(scheme, solver=solver)
-    report = evaluate(model, data, scheme=sch, horizon=horizon)
+    rollout = rollout_data(model, data, scheme=sch, progress=progress)
+    report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout)
     if figures is not None:
-        report_figures(model, data, figures, scheme=scheme, solver=solver)
+        report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout)
     return report
 
 
 def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
-                   solver: str | None = None):
+                   solver: str | None = None, rollout=None):
     """The report figure set: every trajectory's rollout error over time (failed rollouts
     marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
     over time, and the learned E and S along the rollout (each marks where the rollout failed,
-    if it did). Residuals are in the data's rate units (data scale / time scale)."""
+    if it did). Residuals are in the data's rate units (data scale / time scale).
+    ``rollout``: what :func:`~metriplex.diagnostics.rollout_data` returned for this model, data
+    and scheme, to reuse."""
     sch = scheme_from_name(scheme, solver=solver)
-    out, xs, lengths = rollout_data(model, data, scheme=sch)
+    out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
     all_ts = np.asarray(out.ts, dtype=np.float64)
     all_pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
