@@ -26,10 +26,13 @@ layouts; shapes are MATLAB's ``size()``:
    ``t_vec, tvec, t, time, times, ts`` — shared ``(T,)``/``(1, T)``/``(T, 1)`` or per trajectory
    ``(K, T)`` — or from a step named one of ``dt, Dt, DT, delta_t`` (scalar, or ``(K,)`` per
    trajectory; times are then ``0, dt, 2 dt, ...``). With both, the vector is used and the step
-   must match its spacing (to 0.1 %). Optional: ``trajectory_ids`` ``(K,)``; constant operators
-   ``L`` and ``M`` ``(n, n)``, dense or sparse (see :func:`read_mat_operators`).
+   must match its spacing (to 0.1 %). ``dt=STEP`` (the command line's ``--dt``) replaces all of
+   these by ``0, STEP, 2 STEP, ...``: for a file without times, or whose time vector does not
+   fit its snapshots (e.g. 1 × 150 for 300 snapshots). Optional: ``trajectory_ids`` ``(K,)``;
+   constant operators ``L`` and ``M`` ``(n, n)``, dense or sparse (see
+   :func:`read_mat_operators`).
 2. *Long table* — the layout of docs/design.md, 'Trajectory data': ``trajectory`` ``(N,)``,
-   ``t`` ``(N,)``, ``x`` ``(N, n)``; ragged lengths allowed.
+   ``t`` ``(N,)``, ``x`` ``(N, n)``; ragged lengths allowed (with ``dt``, ``t`` is not read).
 
 In both, variable names are an optional cell array of strings (or a char matrix) named one of
 ``names, var_names, variables, labels``. When the file's top level holds none of these
@@ -53,7 +56,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ._errors import MetriplexError
-from .data import Trajectories
+from .data import Trajectories, uniform_times
 
 FORMAT_NAME = "metriplex-trajectories"
 HDF5_FORMAT_VERSION = 1
@@ -202,8 +205,11 @@ def _text(s) -> str:
 
 # -- HDF5 -------------------------------------------------------------------------------------
 
-def read_hdf5(path: str | os.PathLike) -> Trajectories:
+def read_hdf5(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
     """Read trajectories from an HDF5 file laid out as in this module's docstring.
+
+    ``dt``: every trajectory gets the uniform grid ``t = k * dt`` instead of its dataset ``t``,
+    which may then be missing.
 
     ```python
     data = mx.read("runs.h5")
@@ -221,7 +227,7 @@ def read_hdf5(path: str | os.PathLike) -> Trajectories:
         ) from None
     try:
         with f:
-            return _read_hdf5(f, path)
+            return _read_hdf5(f, path, dt)
     except MetriplexError:
         raise
     except (OSError, KeyError, ValueError, TypeError, RuntimeError) as e:
@@ -236,7 +242,7 @@ def _h5_reason(e: Exception) -> str:
     return msg if len(msg) < 200 else msg[:200] + "..."
 
 
-def _read_hdf5(f, path: Path) -> Trajectories:
+def _read_hdf5(f, path: Path, dt: float | None = None) -> Trajectories:
     import h5py
 
     where = f"HDF5 file {_q(path)}"
@@ -269,7 +275,7 @@ def _read_hdf5(f, path: Path) -> Trajectories:
         gw = f"group {g_name!r} of {where}"
         members = sorted(g)
         extra = [m for m in members if m not in ("t", "x")]
-        missing = [m for m in ("t", "x") if m not in members]
+        missing = [m for m in ("t", "x") if m not in members and (dt is None or m != "t")]
         if missing:
             raise MetriplexError(
                 f"{gw} lacks the dataset(s) {missing}; it holds {members or 'nothing'}. Each "
@@ -280,9 +286,11 @@ def _read_hdf5(f, path: Path) -> Trajectories:
                 f"{gw} holds unknown member(s) {extra} besides `t` and `x`. Remove them, or "
                 "store them as attributes; a trajectory group holds exactly `t` and `x`."
             )
-        t = _h5_array(g, "t", gw)
         x = _h5_array(g, "x", gw)
-        t = _vector(t, "dataset `t`", gw)
+        if dt is None:
+            t = _vector(_h5_array(g, "t", gw), "dataset `t`", gw)
+        else:
+            t = np.arange(len(x)) * dt
         if x.ndim == 1:
             x = x[:, None]
         if x.ndim != 2 or x.shape[0] != len(t):
@@ -392,7 +400,9 @@ def read_mat(
     """Read trajectories from a MATLAB ``.mat`` file (layouts in this module's docstring).
 
     ``states`` and ``time`` name the variables to use when the file's names are not among the
-    accepted ones or are ambiguous; ``dt`` supplies the time step of a file that stores none.
+    accepted ones or are ambiguous. ``dt`` gives every trajectory the uniform grid
+    ``t = k * dt`` instead of the file's times, which are then not read: for a file that stores
+    none, or a time vector that does not fit the snapshots (the command line's ``--dt``).
 
     ```python
     data = mx.read("database_double_pendulum.mat")
@@ -649,7 +659,7 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
     names_key = _pick(scope, NAME_KEYS, None, "the variable names", where)
     names = _strings(scope[names_key], f"`{names_key}`", where) if names_key else []
     if states is None and "trajectory" in scope:
-        return (*_mat_long_table(scope, where), names)
+        return (*_mat_long_table(scope, where, dt), names)
     key = _pick(scope, STATE_KEYS, states, "the state array", where, "states")
     if key is None:
         raise MetriplexError(
@@ -682,8 +692,23 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
     return traj, t.reshape(-1), x, names
 
 
+#: The way out when a file's times do not fit its states, in the words of both front ends.
+DT_FIX = ("pass --dt STEP on the command line (read(path, dt=STEP) or read_mat(path, dt=STEP) "
+          "in Python) to use the uniform grid t = k*STEP instead of the file's times")
+
+
 def _mat_times(scope, where, key, shape, *, time, dt):
     K, n, T = shape
+    if dt is not None:  # replaces whatever times the file holds, which are not read
+        if time is not None:
+            raise MetriplexError(
+                f"time={time!r} names the time vector of {where} and dt={dt!r} replaces the "
+                "file's times by a uniform grid; got both. Give one of them."
+            )
+        step = float(dt)
+        if not np.isfinite(step) or step <= 0:
+            raise MetriplexError(f"dt must be positive and finite; got {dt!r}.")
+        return np.broadcast_to(step * np.arange(T), (K, T))
     t_key = _pick(scope, TIME_KEYS, time, "the time vector", where, "time")
     step_key = _pick(scope, STEP_KEYS, None, "the time step", where)
     step = None
@@ -700,17 +725,12 @@ def _mat_times(scope, where, key, shape, *, time, dt):
                 f"time step `{step_key}` in {where} must be positive and finite; got "
                 f"{step.tolist()[:5]}."
             )
-    elif dt is not None:
-        step = np.array([float(dt)])
-        if not np.isfinite(step[0]) or step[0] <= 0:
-            raise MetriplexError(f"dt must be positive and finite; got {dt!r}.")
     if t_key is None:
         if step is None:
             raise MetriplexError(
                 f"{where} gives no times for state array `{key}`: expected a time vector named "
                 f"one of {', '.join(TIME_KEYS)} or a time step named one of "
-                f"{', '.join(STEP_KEYS)}; it holds {_found(scope)}. Add one, or pass "
-                "read_mat(path, dt=STEP)."
+                f"{', '.join(STEP_KEYS)}; it holds {_found(scope)}. Add one, or {DT_FIX}."
             )
         return np.broadcast_to(step.reshape(-1, 1) * np.arange(T), (K, T))
     tv = _real(scope[t_key], f"time vector `{t_key}`", where)
@@ -729,7 +749,8 @@ def _mat_times(scope, where, key, shape, *, time, dt):
         raise MetriplexError(
             f"time vector `{t_key}` in {where} is {_shape(tv)}; state array `{key}` "
             f"({K}×{n}×{T}) has {T} snapshots, so it must have {T} entries (shared) or be "
-            f"{K}×{T} (one row per trajectory).{hint}"
+            f"{K}×{T} (one row per trajectory).{hint} If the snapshots are evenly spaced, "
+            f"{DT_FIX}."
         )
     if step is not None and T > 1:
         steps = np.diff(t, axis=1)
@@ -740,14 +761,14 @@ def _mat_times(scope, where, key, shape, *, time, dt):
             raise MetriplexError(
                 f"time step `{step_key}`={float(expect[k, j])!r} in {where} disagrees with time "
                 f"vector `{t_key}`, whose step {j} in trajectory {k} is {float(steps[k, j])!r}. "
-                "Remove the "
-                "wrong one (the time vector is used when both are present)."
+                "Remove the wrong one (the time vector is used when both are present), or "
+                f"{DT_FIX}."
             )
     return t
 
 
-def _mat_long_table(scope: dict, where: str):
-    missing = [k for k in ("t", "x") if k not in scope]
+def _mat_long_table(scope: dict, where: str, dt: float | None = None):
+    missing = [k for k in ("t", "x") if k not in scope and (dt is None or k != "t")]
     if missing:
         raise MetriplexError(
             f"{where} holds `trajectory`, so it is read as the long table, which needs "
@@ -756,7 +777,10 @@ def _mat_long_table(scope: dict, where: str):
         )
     traj = _real(scope["trajectory"], "`trajectory`", where)
     traj = _vector(traj, "`trajectory`", where)
-    t = _vector(_real(scope["t"], "`t`", where), "`t`", where, len(traj))
+    if dt is None:
+        t = _vector(_real(scope["t"], "`t`", where), "`t`", where, len(traj))
+    else:
+        t = uniform_times(traj, dt)
     x = _real(scope["x"], "`x`", where)
     if x.ndim == 1 or (x.shape == (1, len(traj)) and len(traj) > 1):
         x = x.reshape(-1, 1)  # one variable stored as a row vector

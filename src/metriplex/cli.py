@@ -205,7 +205,8 @@ def cmd_train(args) -> None:
     out = Path(args.out)
     check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
     config = _config_from_args(args)
-    data = read(args.data)
+    _positive_finite(args.dt, "--dt")
+    data = read(args.data, dt=args.dt)
     validate(config, data.n)
     # The lock covers the evaluation and metrics.json too, not only the training.
     with RunLock(out) as lock:
@@ -246,9 +247,10 @@ def cmd_rollout(args) -> None:
     status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
                                     suffixes=(".json",))
     scheme = scheme_from_name(_scheme(args), solver=args.solver)
+    _positive_finite(args.dt, "--dt")
     _honour_model_dtype(args.run)
     model = load(args.run)
-    data = read(args.data)
+    data = read(args.data, dt=args.dt)
     check_names(args.run, data)
     result, _, lengths = rollout_data(model, data, scheme=scheme, progress=not args.quiet)
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
@@ -316,9 +318,10 @@ def cmd_evaluate(args) -> None:
             "got both. Drop one of them."
         )
     _scheme(args)  # a damaged config.json is reported before any work
+    _positive_finite(args.dt, "--dt")
     _honour_model_dtype(args.run)
     model = load(args.run)
-    data = read(args.data)
+    data = read(args.data, dt=args.dt)
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
@@ -404,6 +407,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     _add_structure_options(p)
     p.set_defaults(func=cmd_train)
 
@@ -418,6 +422,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_rollout)
@@ -435,6 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     p.add_argument("--no-verdict", action="store_true",
                    help="skip the 'is it GENERIC?' verdict (consistent | not consistent | "
                    "cannot tell, each reason with its figure, under `verdict` in the JSON; it "
@@ -465,6 +471,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
+_DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), replacing "
+       "the file's times or supplying them (e.g. a .mat time vector that does not fit the "
+       "snapshots)")
 
 DATA_FORMAT = """\
 data format: one row per observed state, in one of
@@ -473,6 +482,7 @@ data format: one row per observed state, in one of
   .h5   one group per trajectory, each with datasets t (T,) and x (T, n)
   .mat  snapshots (trajectories x variables x snapshots) with a time vector or step
 Trajectories may be ragged and unevenly sampled; samples within a trajectory are in time order.
+With --dt STEP the file's times are not read: each trajectory gets t = 0, STEP, 2*STEP, ...
 """
 
 

@@ -47,6 +47,30 @@ def time_scale(pairs: "Pairs", scale: np.ndarray | None = None) -> float:
     return float(np.exp(-np.mean(np.log(rate[moving]))))
 
 
+def uniform_times(trajectory, dt: float) -> np.ndarray:
+    r"""The uniform time grid :math:`t = k\,\Delta t` of each row: ``k`` counts the rows of the
+    same trajectory id before it, in file order (what ``--dt`` gives instead of a file's own
+    times)."""
+    traj = np.asarray(trajectory)
+    if traj.ndim != 1:
+        traj = traj.reshape(len(traj), -1)[:, 0] if traj.ndim else traj.reshape(1)
+    _, group = np.unique(traj, return_inverse=True)
+    group = group.reshape(-1)
+    order = np.argsort(group, kind="stable")
+    counts = np.bincount(group)
+    k = np.empty(len(traj), np.int64)
+    k[order] = np.arange(len(traj)) - np.repeat(np.cumsum(counts) - counts, counts)
+    return k * float(dt)
+
+
+def check_time_step(dt, option: str = "dt") -> float:
+    """A time step: a positive finite number."""
+    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(dt) and dt > 0):
+        raise MetriplexError(f"{option} must be a positive finite time step; got {dt!r}.")
+    return float(dt)
+
+
 @dataclasses.dataclass(frozen=True)
 class Units:
     r"""The data's natural units, in which every network and every loss term works.

@@ -26,7 +26,7 @@ import numpy as np
 
 from ._errors import MetriplexError
 from ._model import GenericModel, float_dtype, with_dtype
-from .data import Trajectories
+from .data import Trajectories, check_time_step, uniform_times
 
 MAGIC = b"METRIPLEX-MODEL\n"
 FORMAT_VERSION = 1
@@ -96,17 +96,25 @@ def _json_default(o):
 
 # -- trajectories -----------------------------------------------------------------------------
 
-def read(path: str | os.PathLike) -> Trajectories:
+def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
     """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``) or MATLAB
     (``.mat``). Layouts: docs/design.md, 'Trajectory data', and :mod:`metriplex._formats`.
+
+    ``dt``: give every trajectory the uniform time grid ``t = k * dt`` (``k = 0, 1, ...`` in the
+    file's order of its samples) instead of the file's own times, which are then not read (a
+    file may lack them, or hold a time vector that does not fit its snapshots). The command
+    line's ``--dt``.
 
     A malformed file raises :class:`MetriplexError` naming the file, the rule it breaks, the
     value found and the fix.
 
     ```python
     data = mx.read("data.npz")
+    data = mx.read("database.mat", dt=0.01)
     ```
     """
+    if dt is not None:
+        dt = check_time_step(dt)
     path = Path(path)
     if not path.exists():
         raise MetriplexError(f"data file {str(path)!r} does not exist; check the path.")
@@ -122,7 +130,7 @@ def read(path: str | os.PathLike) -> Trajectories:
             f"{', '.join(sorted(readers))}."
         )
     try:
-        return readers[suffix](path)
+        return readers[suffix](path) if dt is None else readers[suffix](path, dt=dt)
     except MetriplexError as e:
         if str(path) in str(e):
             raise
@@ -252,8 +260,9 @@ def _readers():
     return readers
 
 
-def read_npz(path: Path) -> Trajectories:
-    """The long table from NPZ: ``trajectory`` (N,), ``t`` (N,), ``x`` (N, n), ``names`` (n,)."""
+def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
+    """The long table from NPZ: ``trajectory`` (N,), ``t`` (N,), ``x`` (N, n), ``names`` (n,);
+    with ``dt``, ``t`` may be left out and is replaced by ``k * dt`` (see :func:`read`)."""
     path = Path(path)
     where = f"NPZ file {str(path)!r}"
     # Our own handle: np.load leaks the one it opens when the archive is unreadable.
@@ -272,7 +281,7 @@ def read_npz(path: Path) -> Trajectories:
                 "names=...)."
             )
         with z:
-            arrays = _npz_arrays(z, where)
+            arrays = _npz_arrays(z, where, need_t=dt is None)
     names = ()
     if "names" in arrays:
         raw = arrays["names"]
@@ -282,15 +291,16 @@ def read_npz(path: Path) -> Trajectories:
                 f"{raw.reshape(-1)[:5].tolist()}. Save np.array(names, dtype=str)."
             )
         names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in raw.reshape(-1))
+    t = arrays["t"] if dt is None else uniform_times(arrays["trajectory"], dt)
     try:
-        return Trajectories(arrays["trajectory"], arrays["t"], arrays["x"], names)
+        return Trajectories(arrays["trajectory"], t, arrays["x"], names)
     except MetriplexError as e:
         raise MetriplexError(f"{where}: {e}") from None
 
 
-def _npz_arrays(z, where: str) -> dict[str, np.ndarray]:
+def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
     found = sorted(z.files)
-    missing = [k for k in ("trajectory", "t", "x") if k not in found]
+    missing = [k for k in ("trajectory", "t", "x") if k not in found and (need_t or k != "t")]
     if missing:
         raise MetriplexError(
             f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
@@ -321,8 +331,9 @@ def _npz_arrays(z, where: str) -> dict[str, np.ndarray]:
     return arrays
 
 
-def read_csv(path: Path) -> Trajectories:
-    """The long table from CSV: header ``trajectory,t,<name_1>,...``, one row per state."""
+def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
+    """The long table from CSV: header ``trajectory,t,<name_1>,...``, one row per state; with
+    ``dt``, the ``t`` column is replaced by ``k * dt`` (see :func:`read`)."""
     import warnings
 
     path = Path(path)
@@ -354,8 +365,9 @@ def read_csv(path: Path) -> Trajectories:
         return header
 
     def build(arr: np.ndarray, header: list[str]) -> Trajectories:
+        t = arr[:, 1] if dt is None else uniform_times(arr[:, 0], dt)
         try:
-            return Trajectories(arr[:, 0], arr[:, 1], arr[:, 2:], tuple(header[2:]))
+            return Trajectories(arr[:, 0], t, arr[:, 2:], tuple(header[2:]))
         except MetriplexError as e:
             raise MetriplexError(f"{where}: {e}") from None
 
@@ -420,6 +432,9 @@ def read_csv(path: Path) -> Trajectories:
                 arr[k, j] = v = float(c)
             except ValueError:
                 v = None
+            if j == 1 and dt is not None:  # the file's times are not used
+                arr[k, j] = 0.0
+                continue
             if v is None or v != v or v in (float("inf"), float("-inf")):
                 what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
                 raise MetriplexError(
