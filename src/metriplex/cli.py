@@ -88,7 +88,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "(default: no time limit)")
     w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
     w.add_argument("--validation", type=float,
-                   help=f"fraction of trajectories held out (default {d.validation})")
+                   help="fraction of the selected trajectories held out for validation, drawn "
+                   f"at random with --seed (default {d.validation}; 0 for none); to choose "
+                   "them, see --validation-ids and --split")
     w.add_argument("--eval-every", type=int, help=f"steps between validations (default {d.eval_every})")
     w.add_argument("--patience", type=int, help="validations without improvement before the "
                    "learning rate is cut (x0.3, from the best model; after --lr-cuts cuts "
@@ -198,7 +200,7 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
 
 def cmd_train(args) -> None:
     from ._lock import RunLock
-    from .config import validate
+    from .config import check_selection, choose_trajectories, validate
     from .io import read
     from .runs import check_run_folder, evaluate_run, train_run, write_json
 
@@ -206,15 +208,21 @@ def cmd_train(args) -> None:
     check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
     config = _config_from_args(args)
     _positive_finite(args.dt, "--dt")
+    selection = check_selection(trajectories=args.trajectories,
+                                validation_ids=args.validation_ids, split=args.split,
+                                validation=args.validation)
     data = read(args.data, dt=args.dt)
     validate(config, data.n)
+    trajectories, validation_ids = choose_trajectories(
+        data.ids, f"the data file {str(args.data)!r}", selection)
     # The lock covers the evaluation and metrics.json too, not only the training.
     with RunLock(out) as lock:
         if lock.note:
             print(lock.note, file=sys.stderr)
         model, history, train, valid, seconds = train_run(
             data, config, out, overwrite=args.overwrite, resume=args.resume,
-            progress=not args.quiet,
+            progress=not args.quiet, trajectories=trajectories,
+            validation_ids=validation_ids, source={"file": str(args.data), "dt": args.dt},
         )
         target = valid if valid is not None else train
         metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
@@ -240,17 +248,17 @@ def cmd_rollout(args) -> None:
     from .data import Trajectories
     from .diagnostics import rollout_data
     from .integrate import scheme_from_name, step_failure
-    from .io import check_output_file, load, read, write, write_json
+    from .io import check_output_file, load, write, write_json
     from .runs import check_names
 
     out = _check_trajectory_out(args.out, args.overwrite)
     status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
                                     suffixes=(".json",))
     scheme = scheme_from_name(_scheme(args), solver=args.solver)
-    _positive_finite(args.dt, "--dt")
+    chosen = _chosen_trajectories(args)
     _honour_model_dtype(args.run)
     model = load(args.run)
-    data = read(args.data, dt=args.dt)
+    data = _read_data(args, chosen)
     check_names(args.run, data)
     result, _, lengths = rollout_data(model, data, scheme=scheme, progress=not args.quiet)
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
@@ -287,6 +295,24 @@ def cmd_rollout(args) -> None:
           f"{n_failed} of {len(status)} failed, see {status_path})")
 
 
+def _chosen_trajectories(args):
+    """``--trajectories`` and ``--dt`` of rollout and evaluate, checked before any work."""
+    from .config import parse_ids
+
+    _positive_finite(args.dt, "--dt")
+    return None if args.trajectories is None else parse_ids(args.trajectories, "--trajectories")
+
+
+def _read_data(args, chosen):
+    """DATA as read (with ``--dt``), only the ``--trajectories`` chosen."""
+    from .io import read
+
+    data = read(args.data, dt=args.dt)
+    if chosen is not None:
+        data = data.select(chosen.pick(data.ids, f"the data file {str(args.data)!r}"))
+    return data
+
+
 def _scheme(args) -> str:
     """The --scheme given, else the one the run in args.run was trained with."""
     if args.scheme:
@@ -299,7 +325,7 @@ def _scheme(args) -> str:
 def cmd_evaluate(args) -> None:
     import json
 
-    from .io import check_output_file, check_output_folder, load, read, write_json
+    from .io import check_output_file, check_output_folder, load, write_json
     from .runs import check_names, evaluate_run
 
     if args.out:
@@ -318,10 +344,10 @@ def cmd_evaluate(args) -> None:
             "got both. Drop one of them."
         )
     _scheme(args)  # a damaged config.json is reported before any work
-    _positive_finite(args.dt, "--dt")
+    chosen = _chosen_trajectories(args)
     _honour_model_dtype(args.run)
     model = load(args.run)
-    data = read(args.data, dt=args.dt)
+    data = _read_data(args, chosen)
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
@@ -404,9 +430,20 @@ def build_parser() -> argparse.ArgumentParser:
                    "checkpoint.ckpt, figures/")
     p.add_argument("--preset", help="rigid-body | pendulum-energetic | pendulum-temperature | "
                    "gas-containers")
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out "
+                   "(with the same DATA, --dt, trajectories and options; others are refused)")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    s = p.add_argument_group("which trajectories train and validate (the ids used are "
+                             "recorded in RUN_DIR/config.json)")
+    s.add_argument("--trajectories", metavar="IDS", help="use only these trajectory ids of "
+                   f"DATA, {_IDS} (default: all)")
+    s.add_argument("--validation-ids", metavar="IDS", help="these of the selected trajectories "
+                   "validate, the rest train (instead of the random --validation fraction)")
+    s.add_argument("--split", metavar="FILE", help="the split to use: a JSON file "
+                   '{"train": [ids], "validation": [ids]} (optionally "test": [ids], which '
+                   "must not overlap them), or a run folder (or its config.json) whose split "
+                   "is reused exactly")
     p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     _add_structure_options(p)
     p.set_defaults(func=cmd_train)
@@ -422,6 +459,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
+    p.add_argument("--trajectories", metavar="IDS",
+                   help=f"predict only these trajectory ids of DATA, {_IDS} (default: all)")
     p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -440,6 +479,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "iteration, Newton where it does not converge) | newton (stiff models) | "
                    "fixed-point")
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
+    p.add_argument("--trajectories", metavar="IDS",
+                   help=f"evaluate only these trajectory ids of DATA, {_IDS} (default: all; "
+                   "the ids evaluated are `trajectory_ids` in the JSON)")
     p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
     p.add_argument("--no-verdict", action="store_true",
                    help="skip the 'is it GENERIC?' verdict (consistent | not consistent | "
@@ -471,6 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
+_IDS = "a comma list with ranges such as 0,3,5-9"
 _DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), replacing "
        "the file's times or supplying them (e.g. a .mat time vector that does not fit the "
        "snapshots)")

@@ -382,5 +382,21 @@ class Trajectories:
         n_val = min(max(1, int(round(len(ids) * fraction))), len(ids) - 1)
         return self.select(np.sort(perm[n_val:])), self.select(np.sort(perm[:n_val]))
 
+    def fingerprint(self) -> dict:
+        """What identifies these data cheaply: ``trajectory_ids``, ``shape`` (rows, variables)
+        and ``sha256``, a hash of the ids, times, states and names (a run folder records it,
+        and ``--resume`` compares it)."""
+        import hashlib
+        import json
+
+        h = hashlib.sha256()
+        for a in (self.trajectory, self.t, self.x):
+            a = np.ascontiguousarray(a)
+            h.update(f"{a.dtype.str}{a.shape}".encode())
+            h.update(a)
+        h.update(json.dumps(list(self.names)).encode())
+        return {"trajectory_ids": [int(i) for i in self.ids],
+                "shape": [int(len(self.t)), self.n], "sha256": h.hexdigest()}
+
     def with_names(self, names: Sequence[str]) -> "Trajectories":
         return Trajectories(self.trajectory, self.t, self.x, tuple(names))

@@ -23,7 +23,16 @@ from . import plots
 from ._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._model import with_dtype
-from .config import RunConfig, build_loss, build_model, stopping_for, units_for, validate
+from .config import (
+    RunConfig,
+    TrajectoryIds,
+    build_loss,
+    build_model,
+    format_ids,
+    stopping_for,
+    units_for,
+    validate,
+)
 from .data import Trajectories, state_scale, time_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name
@@ -64,8 +73,18 @@ def train_run(
     overwrite: bool = False,
     resume: bool = False,
     progress: bool = True,
+    trajectories=None,
+    validation_ids=None,
+    source: dict | None = None,
 ):
-    """Train a model described by ``config`` on ``data`` and fill the run folder ``out``."""
+    """Train a model described by ``config`` on ``data`` and fill the run folder ``out``.
+
+    ``trajectories``: the ids of ``data`` to use (default all). ``validation_ids``: the ids of
+    those that validate, the rest train (empty: no validation); by default
+    ``config.validation`` of them, drawn with ``config.seed``. ``source`` (e.g. the data file
+    and ``dt``) is recorded in ``config.json`` beside the data's fingerprint, which ``resume``
+    compares with the interrupted run's.
+    """
     out = Path(out)
     validate(config, data.n)
     check_output_folder(out)
@@ -73,10 +92,68 @@ def train_run(
         if lock.note:
             print(lock.note, file=sys.stderr)
         return _train_run(data, config, out, overwrite=overwrite, resume=resume,
-                          progress=progress)
+                          progress=progress, trajectories=trajectories,
+                          validation_ids=validation_ids, source=source)
 
 
-def _train_run(data, config, out, *, overwrite, resume, progress):
+def split_trajectories(data: Trajectories, config: RunConfig, *, trajectories=None,
+                       validation_ids=None) -> tuple[Trajectories, Trajectories | None]:
+    """``(train, validation)`` of :func:`train_run` (see its ``trajectories`` and
+    ``validation_ids``); ids that ``data`` lack, or no trajectory left to train, are refused."""
+    if trajectories is not None:
+        chosen = TrajectoryIds.of(np.asarray(trajectories).reshape(-1).tolist(),
+                                  "trajectories")
+        if not len(chosen):
+            raise MetriplexError("trajectories is empty; give at least one id (None: all).")
+        data = data.select(chosen.pick(data.ids, "the data"))
+    if validation_ids is None:
+        return data.split(config.validation, seed=config.seed)
+    held = TrajectoryIds.of(np.asarray(validation_ids).reshape(-1).tolist(), "validation_ids")
+    valid = held.pick(data.ids, "the selected trajectories")
+    rest = np.setdiff1d(data.ids, valid)
+    if len(rest) == 0:
+        raise MetriplexError(
+            f"validation_ids takes every selected trajectory ({format_ids(valid)}), which "
+            "leaves none to train on; leave at least one out of it."
+        )
+    return data.select(rest), (data.select(valid) if len(valid) else None)
+
+
+def _describe_data(info: dict) -> str:
+    where = f"{info['file']!r}" if info.get("file") else "data"
+    if info.get("dt") is not None:
+        where += f" with --dt {info['dt']!r}"
+    ids = info.get("trajectory_ids") or []
+    rows, n = (info.get("shape") or [None, None])[:2]
+    return (f"{where} ({len(ids)} trajectories, ids {format_ids(ids)}; {rows} rows x {n} "
+            f"variables; sha256 {str(info.get('sha256'))[:12]})")
+
+
+def _check_resume(stored: dict, data_info: dict, train, valid) -> None:
+    """``--resume`` continues only the interrupted run: the same data, the same split."""
+    old = stored.get("data")
+    if isinstance(old, dict) and old.get("sha256") and old.get("sha256") != data_info["sha256"]:
+        raise MetriplexError(
+            f"--resume needs the data of the interrupted run, but they differ: it trained on "
+            f"{_describe_data(old)}; this command gives {_describe_data(data_info)}. Resume "
+            "with the same data file (and the same --dt), or start a new run (--overwrite)."
+        )
+    ids = (sorted(int(i) for i in train.ids),
+           [] if valid is None else sorted(int(i) for i in valid.ids))
+    before = (sorted(stored.get("train_trajectories", ids[0])),
+              sorted(stored.get("validation_trajectories", ids[1])))
+    if before != ids:
+        raise MetriplexError(
+            f"--resume needs the trajectories of the interrupted run, but they differ: it "
+            f"trained on {format_ids(before[0])} and validated on {format_ids(before[1])}; this "
+            f"command trains on {format_ids(ids[0])} and validates on {format_ids(ids[1])}. "
+            "Repeat its --trajectories, --validation-ids or --split, or pass --split RUN_DIR to "
+            "reuse its split."
+        )
+
+
+def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=None,
+               validation_ids=None, source=None):
     if config.float64:
         jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64 if config.float64 else jnp.float32
@@ -96,7 +173,11 @@ def _train_run(data, config, out, *, overwrite, resume, progress):
                 f"--resume needs the configuration of the interrupted run; these differ "
                 f"(saved, given): {diff}. Repeat the original options."
             )
-    train, valid = data.split(config.validation, seed=config.seed)
+    train, valid = split_trajectories(data, config, trajectories=trajectories,
+                                      validation_ids=validation_ids)
+    data_info = {**(source or {}), **data.fingerprint()}
+    if resume:
+        _check_resume(run_config(out), data_info, train, valid)
     model_key, fit_key = jr.split(jr.key(config.seed))
     units = units_for(config, train)
     model = build_model(config, train, key=model_key, units=units)
@@ -108,6 +189,11 @@ def _train_run(data, config, out, *, overwrite, resume, progress):
         "n": data.n,
         "train_trajectories": [int(i) for i in train.ids],
         "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
+        # "ids": given (--validation-ids, --split); "fraction": config.validation of them at
+        # random (config.seed), or the last samples of a single trajectory.
+        "validation_by": "fraction" if validation_ids is None else "ids",
+        # The whole data file as read (--dt applied), whichever trajectories were selected.
+        "data": data_info,
         "loss_terms": list(loss.names),
         "units": units.to_json(),
     }
