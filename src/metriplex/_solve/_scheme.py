@@ -1,0 +1,37 @@
+"""The interface of a one-step scheme, and the default solver tolerance."""
+
+from __future__ import annotations
+
+import abc
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._model import GenericModel, Terms
+from .._types import State
+
+
+
+def _tolerance(value: float | None, dtype) -> float:
+    if value is not None:
+        return value
+    return 1e-11 if jnp.dtype(dtype) == jnp.float64 else 1e-5
+
+
+class AbstractScheme(eqx.Module):
+    """A one-step time integrator for a :class:`~metriplex.GenericModel`."""
+
+    name: ClassVar[str] = ""
+
+    @abc.abstractmethod
+    def step(self, model: GenericModel, x: State, dt, guess: State):
+        """Return ``(x_next, converged, iterations)``."""
+
+    def step_batch(self, model: GenericModel, x, dt, guess):
+        """:meth:`step` for a batch of states ``x`` ``(B, n)``, steps ``dt`` ``(B,)``."""
+        return jax.vmap(lambda x, dt, g: self.step(model, x, dt, g))(x, dt, guess)
+
+    @abc.abstractmethod
+    def residual(self, model, x0, x1, dt, terms0: Terms, terms1: Terms) -> State: ...

@@ -1,0 +1,30 @@
+"""The explicit fourth-order Runge–Kutta step."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import jax.numpy as jnp
+
+from ._scheme import AbstractScheme
+
+
+class RK4(AbstractScheme):
+    """Classical explicit fourth-order Runge–Kutta (a reference scheme; no structure kept)."""
+
+    name: ClassVar[str] = "rk4"
+
+    def advance(self, model, x, dt):
+        f = model.vector_field
+        k1 = f(x)
+        k2 = f(x + 0.5 * dt * k1)
+        k3 = f(x + 0.5 * dt * k2)
+        k4 = f(x + dt * k3)
+        return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    def step(self, model, x, dt, guess):
+        y = self.advance(model, x, dt)
+        return y, jnp.all(jnp.isfinite(y)), jnp.array(0)
+
+    def residual(self, model, x0, x1, dt, terms0, terms1):
+        return (x1 - self.advance(model, x0, dt)) / dt

@@ -1,0 +1,216 @@
+"""Batched rollouts of a model with a scheme: :func:`solve` (a result code per trajectory)
+and :func:`simulate` (raises on failure)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import MetriplexError, RolloutFailure
+from .._model import GenericModel
+from .._types import Array, Float, Int
+from ._scheme import AbstractScheme
+from ._implicit import _Implicit
+from .crank_nicolson import CrankNicolson
+
+
+class Rollout(NamedTuple):
+    """States along a rollout, and where (if anywhere) an implicit step failed.
+
+    ``xs[..., k, :]`` for ``k >= failed_step`` are NaN: they were never computed.
+    ``failed_step`` is ``-1`` for a rollout that completed.
+    """
+
+    ts: Float[Array, "*batch T"]
+    xs: Float[Array, "*batch T n"]
+    failed_step: Int[Array, "*batch"]
+    iterations: Int[Array, "*batch T"]
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(np.asarray(self.failed_step) < 0))
+
+
+def _predict(x, d1, h1, d2, h2, h):
+    r"""Newton's starting guess: the quadratic through the last three states, at ``t + h``.
+
+    ``d1 = x_n - x_{n-1}`` over ``h1``, ``d2 = x_{n-1} - x_{n-2}`` over ``h2`` (zero length:
+    not known yet, which lowers the degree). The predictor error is :math:`O(h^3)`, below
+    the Newton tolerance for moderate steps, so most steps need one or two iterations.
+    """
+    known1 = h1 > 0
+    known2 = known1 & (h2 > 0)
+    s1 = jnp.where(known1, d1 / jnp.where(known1, h1, 1.0), 0.0)
+    s2 = jnp.where(known2, d2 / jnp.where(known2, h2, 1.0), 0.0)
+    curv = jnp.where(known2, (s1 - s2) / jnp.where(known2, h1 + h2, 1.0), 0.0)
+    return x + h * s1 + (h * (h + h1)) * curv
+
+
+def _rollout(model, scheme, x0, ts):
+    """Roll out a batch: ``x0`` ``(B, n)``, ``ts`` ``(B, T)``; the scan runs over time and each
+    step advances the whole batch at once (so the scheme can decide per step, for the batch,
+    whether Newton is needed)."""
+    dts = jnp.diff(ts, axis=-1).T  # (T - 1, B)
+    zero = jnp.zeros(x0.shape[:1], x0.dtype)
+
+    def body(carry, dt):
+        x, d1, h1, d2, h2, failed = carry
+        # A failed trajectory takes zero steps from here on: its solves end at once.
+        h = jnp.where(failed, 0.0, dt)
+        guess = jax.vmap(_predict)(x, d1, h1, d2, h2, h)
+        y, ok, its = scheme.step_batch(model, x, h, guess)
+        moved = h > 0
+        bad = failed | (moved & ~ok)
+        y = jnp.where(moved[:, None], y, x)  # a zero step keeps the state exactly
+        x_new = jnp.where(bad[:, None], x, y)
+        advance = moved & ~bad
+        a = advance[:, None]
+        carry = (
+            x_new,
+            jnp.where(a, y - x, d1),
+            jnp.where(advance, h, h1),
+            jnp.where(a, d1, d2),
+            jnp.where(advance, h1, h2),
+            bad,
+        )
+        its = jnp.where(failed, 0, jnp.asarray(its, jnp.asarray(0).dtype))
+        return carry, (jnp.where(bad[:, None], jnp.nan, y), bad, its)
+
+    no = jnp.zeros(x0.shape[:1], bool)
+    init = (x0, jnp.zeros_like(x0), zero, jnp.zeros_like(x0), zero, no)
+    _, (xs, bad, its) = jax.lax.scan(body, init, dts)
+    xs = jnp.concatenate([x0[:, None], jnp.swapaxes(xs, 0, 1)], axis=1)
+    bad = jnp.concatenate([no[:, None], bad.T], axis=1)
+    failed_step = jnp.where(jnp.any(bad, axis=1), jnp.argmax(bad, axis=1), -1)
+    its = jnp.concatenate([jnp.zeros_like(its[:1]).T, its.T], axis=1)
+    return xs, failed_step, its
+
+
+@eqx.filter_jit
+def _rollout_one(model, scheme, x0, ts):
+    xs, failed, its = _rollout(model, scheme, x0[None], ts[None])
+    return xs[0], failed[0], its[0]
+
+
+_rollout_batch = eqx.filter_jit(_rollout)
+
+
+def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") -> str:
+    """What went wrong in a failed step from ``t0`` to ``t1`` (``where``, e.g. " of trajectory
+    3", follows the times), and what to try, in the words of ``scheme``: an implicit step's
+    solve did not converge; an explicit step (RK4) has nothing to converge, its new state was
+    not finite."""
+    name = getattr(scheme, "name", "") or type(scheme).__name__
+    span = f"from t={t0:.6g} to t={t1:.6g}{where}"
+    if isinstance(scheme, _Implicit):
+        return (
+            f"the implicit {name} step {span} did not converge (solver {scheme.solver!r}). Try "
+            "the Newton solver (--solver newton), a smaller time step, or RK4 (--scheme rk4) "
+            "to see whether the model itself blows up"
+        )
+    return (
+        f"the explicit {name} step {span} gave a non-finite state: the model's vector field "
+        "overflowed or is NaN there (the model blows up along this trajectory). A smaller time "
+        "step helps only if the step itself was unstable; otherwise the model needs more or "
+        "wider training data"
+    )
+
+
+def _check_inputs(x0, ts, n):
+    if x0.ndim not in (1, 2):
+        raise MetriplexError(
+            f"x0 must have shape (n,) or (batch, n); got shape {x0.shape}."
+        )
+    if n is not None and x0.shape[-1] != n:
+        raise MetriplexError(
+            f"x0 has {x0.shape[-1]} state variables but the model expects {n}; pass states with "
+            f"{n} components."
+        )
+    if ts.ndim not in (1, 2) or ts.shape[-1] < 1:
+        raise MetriplexError(f"ts must have shape (T,) or (batch, T); got shape {ts.shape}.")
+    if not np.all(np.isfinite(np.asarray(x0))) or not np.all(np.isfinite(np.asarray(ts))):
+        raise MetriplexError("x0 and ts must be finite; found NaN or inf. Clean the input first.")
+    if ts.shape[-1] > 1 and np.any(np.diff(np.asarray(ts), axis=-1) < 0):
+        raise MetriplexError(
+            "ts must be non-decreasing; got a negative time step. Sort the time grid."
+        )
+
+
+def model_size(model: GenericModel) -> int | None:
+    for block in (model.poisson, model.friction, model.energy):
+        n = getattr(block, "n", None)
+        if isinstance(n, int):
+            return n
+    return None
+
+
+def solve(
+    model: GenericModel,
+    x0: Float[Array, "*batch n"],
+    ts: Float[Array, "*batch T"],
+    *,
+    scheme: AbstractScheme | None = None,
+) -> Rollout:
+    """Roll out ``model`` from ``x0`` on the time grid ``ts``; never raises on a failed step.
+
+    ``x0`` of shape ``(n,)`` or ``(batch, n)``; ``ts`` of shape ``(T,)`` (shared) or
+    ``(batch, T)`` (one grid per trajectory, e.g. non-uniform or padded with repeated times:
+    a zero step keeps the state).
+    """
+    scheme = CrankNicolson() if scheme is None else scheme
+    x0 = jnp.asarray(x0)
+    ts = jnp.asarray(ts, dtype=x0.dtype)
+    _check_inputs(x0, ts, model_size(model))
+    if x0.ndim == 1:
+        if ts.ndim != 1:
+            raise MetriplexError(f"a single x0 needs ts of shape (T,); got {ts.shape}.")
+        xs, failed, its = _rollout_one(model, scheme, x0, ts)
+        return Rollout(ts, xs, failed, its)
+    if ts.ndim == 1:
+        ts = jnp.broadcast_to(ts, (x0.shape[0], ts.shape[0]))
+    if ts.shape[0] != x0.shape[0]:
+        raise MetriplexError(
+            f"ts has {ts.shape[0]} grids for {x0.shape[0]} initial states; give one shared grid "
+            "of shape (T,) or one per state."
+        )
+    xs, failed, its = _rollout_batch(model, scheme, x0, ts)
+    return Rollout(ts, xs, failed, its)
+
+
+def simulate(
+    model: GenericModel,
+    x0: Float[Array, "*batch n"],
+    ts: Float[Array, "*batch T"],
+    *,
+    scheme: AbstractScheme | None = None,
+) -> Float[Array, "*batch T n"]:
+    """Simulate ``model`` from ``x0`` on ``ts``; shape ``(T, n)`` or ``(batch, T, n)``.
+
+    Implicit Crank–Nicolson by default. If a step does not converge this raises
+    :class:`~metriplex.RolloutFailure` naming the trajectory and time, with the states computed
+    up to there in ``.partial``; use :func:`solve` to get the marked result without raising.
+
+    ```python
+    xs = mx.simulate(model, x0, jnp.linspace(0.0, 10.0, 101))
+    ```
+    """
+    out = solve(model, x0, ts, scheme=scheme)
+    failed = np.atleast_1d(np.asarray(out.failed_step))
+    if np.any(failed >= 0):
+        b = int(np.argmax(failed >= 0))
+        k = int(failed[b])
+        ts_b = np.asarray(out.ts).reshape(-1, np.asarray(out.ts).shape[-1])[b]
+        xs_b = np.asarray(out.xs).reshape(-1, *np.asarray(out.xs).shape[-2:])[b]
+        what = step_failure(CrankNicolson() if scheme is None else scheme,
+                            float(ts_b[k - 1]), float(ts_b[k]), f" of trajectory {b}")
+        raise RolloutFailure(
+            f"step {k}: {what}. The {k} states computed before it are in .partial.",
+            partial=xs_b[:k],
+            trajectory=b,
+            time=float(ts_b[k]),
+        )
+    return out.xs
