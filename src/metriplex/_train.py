@@ -292,6 +292,25 @@ def check_pairs(p: Pairs, n: int | None, what: str) -> None:
             raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
 
 
+def check_arguments(*, steps, batch_size, eval_every, learning_rate, patience, lbfgs_steps,
+                    lbfgs_pairs) -> None:
+    """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
+    if steps < 0 or batch_size < 1 or eval_every < 1:
+        raise MetriplexError(
+            f"need steps >= 0, batch_size >= 1 and eval_every >= 1; got steps={steps}, "
+            f"batch_size={batch_size}, eval_every={eval_every}."
+        )
+    if not learning_rate > 0:
+        raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
+    if patience is not None and patience < 1:
+        raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
+    if lbfgs_steps < 0 or lbfgs_pairs < 1:
+        raise MetriplexError(
+            f"need lbfgs_steps >= 0 and lbfgs_pairs >= 1; got lbfgs_steps={lbfgs_steps}, "
+            f"lbfgs_pairs={lbfgs_pairs}."
+        )
+
+
 def spread(m: int, k: int) -> np.ndarray:
     """Indices of all ``m`` items when ``m <= k``, else of ``k`` evenly spread ones (a fixed
     subset: one compiled shape, the same items at every evaluation)."""
@@ -299,12 +318,12 @@ def spread(m: int, k: int) -> np.ndarray:
 
 
 def to_batch(pairs: Pairs, idx, scale, dtype) -> Batch:
-    return Batch(
-        jnp.asarray(pairs.x0[idx], dtype),
-        jnp.asarray(pairs.x1[idx], dtype),
-        jnp.asarray(pairs.dt[idx], dtype),
-        jnp.asarray(scale, dtype),
-    )
+    """The pairs ``idx`` (``None``: all, without an indexed copy) as arrays of ``dtype``."""
+    def take(a):
+        a = a if idx is None else a[idx]
+        return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
+
+    return Batch(take(pairs.x0), take(pairs.x1), take(pairs.dt), jnp.asarray(scale, dtype))
 
 
 def batch_sharding(enabled: bool, batch_size: int):

@@ -26,7 +26,7 @@ def state_scale(x: np.ndarray) -> np.ndarray:
     return np.where(s > 1e-12 * max(float(np.abs(x).max()), 1.0), s, 1.0)
 
 
-def time_scale(pairs: "Pairs", scale: np.ndarray | None = None) -> float:
+def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -> float:
     r"""The data's time scale :math:`\tau`: the time over which a typical variable moves by one
     of its standard deviations.
 
@@ -37,10 +37,28 @@ def time_scale(pairs: "Pairs", scale: np.ndarray | None = None) -> float:
     and networks measured in :math:`\tau` do not depend on either. Data that never move get
     :math:`\tau = 1`.
     """
-    d = state_scale(pairs.x0) if scale is None else np.asarray(scale, dtype=np.float64)
-    v = (np.asarray(pairs.x1, np.float64) - np.asarray(pairs.x0, np.float64)) / np.asarray(
-        pairs.dt, np.float64)[:, None]
-    rate = np.sqrt(np.mean(v**2, axis=0)) / d
+    squares, count = np.zeros(0), 0
+    rows = 1 << 16  # in blocks, so large data need no temporary copies of their size
+    if isinstance(pairs, Trajectories):  # the pairs of consecutive rows, never built whole
+        data = pairs
+        d = state_scale(data.x) if scale is None else np.asarray(scale, dtype=np.float64)
+        squares = np.zeros(data.n)
+        for s in range(0, len(data.t) - 1, rows):
+            e = min(s + rows, len(data.t) - 1)
+            same = data.trajectory[s + 1 : e + 1] == data.trajectory[s:e]
+            v = (data.x[s + 1 : e + 1] - data.x[s:e])[same] / np.diff(data.t[s : e + 1])[same, None]
+            squares += np.sum(v**2, axis=0)
+            count += int(same.sum())
+    else:
+        d = state_scale(pairs.x0) if scale is None else np.asarray(scale, dtype=np.float64)
+        squares = np.zeros(np.shape(pairs.x0)[1])
+        for s in range(0, len(pairs.dt), rows):
+            v = (np.asarray(pairs.x1[s : s + rows], np.float64)
+                 - np.asarray(pairs.x0[s : s + rows], np.float64)) / np.asarray(
+                pairs.dt[s : s + rows], np.float64)[:, None]
+            squares += np.sum(v**2, axis=0)
+        count = len(pairs.dt)
+    rate = np.sqrt(squares / max(count, 1)) / d
     moving = rate > 1e-12 * max(float(rate.max(initial=0.0)), 1e-300)
     if not np.any(moving) or not np.all(np.isfinite(rate)):
         return 1.0
@@ -119,7 +137,7 @@ class Units:
 
         shift, scale = data_statistics(data.x)
         d = np.asarray(scale)
-        tau = time_scale(data.pairs(), d)
+        tau = time_scale(data, d)
         x = data.x[np.linspace(0, len(data.x) - 1, min(256, len(data.x))).astype(int)]
         energy = entropy_scale = 1.0
         if poisson is not None:
@@ -220,7 +238,7 @@ class Trajectories:
             x = x[:, None]
         if x.dtype.kind not in "fiu":
             raise MetriplexError(f"state values must be numbers; got dtype {x.dtype}.")
-        x = x.astype(np.float64)
+        x = np.asarray(x, np.float64)  # no copy of float64 data (large files: memory)
         if traj.ndim != 1 or t.ndim != 1 or x.ndim != 2:
             raise MetriplexError(
                 "trajectory and t must be 1-D and x 2-D (rows x variables); got shapes "
@@ -260,8 +278,9 @@ class Trajectories:
                     f"{traj[row]}, t={t[row]}). Remove or interpolate those samples."
                 )
         # Stable sort by trajectory id keeps rows of a trajectory in file order.
-        order = np.argsort(traj, kind="stable")
-        traj, t, x = traj[order], t[order], x[order]
+        if np.any(traj[1:] < traj[:-1]):  # already sorted (the usual case): no copies
+            order = np.argsort(traj, kind="stable")
+            traj, t, x = traj[order], t[order], x[order]
         ids, starts, counts = np.unique(traj, return_index=True, return_counts=True)
         for i, s, c in zip(ids, starts, counts):
             if c < 2:
@@ -335,10 +354,12 @@ class Trajectories:
         m = np.isin(self.trajectory, np.asarray(ids))
         return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
 
-    def pairs(self) -> Pairs:
-        """Consecutive rows of the same trajectory, each with its own ``dt``."""
+    def pairs(self, dtype=None) -> Pairs:
+        """Consecutive rows of the same trajectory, each with its own ``dt``; states in
+        ``dtype`` (default: float64, as stored; float32 halves the memory of large data)."""
         same = self.trajectory[1:] == self.trajectory[:-1]
-        return Pairs(self.x[:-1][same], self.x[1:][same], np.diff(self.t)[same])
+        x = self.x if dtype is None else np.asarray(self.x, dtype)
+        return Pairs(x[:-1][same], x[1:][same], np.diff(self.t)[same])
 
     def padded(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(ts, xs, lengths)`` padded to the longest trajectory by repeating the last row.

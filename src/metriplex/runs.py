@@ -346,8 +346,8 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
         folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
         error_per_variable=per_var, names=np.array(names))
     # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
-    rate = scale / time_scale(data.pairs(), scale)
-    tk, xk = data.padded()[0][k, :T], obs
+    rate = scale / time_scale(data, scale)
+    tk, xk = data.select([data.ids[k]]).t[:T], obs
     dtype = out.xs.dtype
     x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
     dt = jnp.asarray(np.diff(tk), dtype)

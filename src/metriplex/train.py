@@ -33,6 +33,7 @@ from ._train import (
     make_chunk,
     as_pairs,
     batch_sharding,
+    check_arguments,
     check_pairs,
     make_lbfgs_chunk,
     spread,
@@ -40,7 +41,7 @@ from ._train import (
     with_learning_rate,
 )
 from ._validate import Plateau, RolloutCheck, rollout_score, scheme_of
-from .data import Pairs, Trajectories, state_scale, time_scale
+from .data import Trajectories, state_scale, time_scale
 from .integrate import model_size
 from .losses import CrankNicolsonResidual, Loss
 
@@ -82,10 +83,9 @@ def fit(
     warm-up; after ``stopping.patience`` evaluations without improvement the learning rate is
     cut (``stopping.factor``) and training resumes from the best model; after
     ``stopping.cuts`` plateaus it stops (``history.converged``). ``steps`` (and
-    ``max_seconds``) cap the run; over the last fifth of ``steps`` the rate is annealed
-    (cosine to 1%), so a run that the cap ends still finishes on a small rate. The validation score is the error of short rollouts of the
-    held-out trajectories (``rollout_check``), so the model kept is the one that rolls out
-    best, not only the one with the smallest pair residual.
+    ``max_seconds``) cap the run; over the last fifth of ``steps`` the rate is annealed (cosine
+    to 1%). The validation score is the error of short rollouts of the held-out trajectories
+    (``rollout_check``): the model kept is the one that rolls out best.
 
     Parameters
     ----------
@@ -144,29 +144,21 @@ def fit(
     model, history = fit(model, data, key=jr.key(0))
     ```
     """
-    if steps < 0 or batch_size < 1 or eval_every < 1:
-        raise MetriplexError(
-            f"need steps >= 0, batch_size >= 1 and eval_every >= 1; got steps={steps}, "
-            f"batch_size={batch_size}, eval_every={eval_every}."
-        )
-    if not learning_rate > 0:
-        raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
-    if patience is not None and patience < 1:
-        raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
-    if lbfgs_steps < 0 or lbfgs_pairs < 1:
-        raise MetriplexError(
-            f"need lbfgs_steps >= 0 and lbfgs_pairs >= 1; got lbfgs_steps={lbfgs_steps}, "
-            f"lbfgs_pairs={lbfgs_pairs}."
-        )
+    check_arguments(steps=steps, batch_size=batch_size, eval_every=eval_every,
+                    learning_rate=learning_rate, patience=patience, lbfgs_steps=lbfgs_steps,
+                    lbfgs_pairs=lbfgs_pairs)
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
     n = getattr(model, "n", None) or model_size(model)
     valid_pairs = None
     valid_data = None
+    dtype = float_dtype(model, default=jnp.float32) if dtype is None else dtype
     if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
         train_data, valid_data = data.split(float(validation), seed=seed_split)
-        train_pairs = train_data.pairs()
+        # Given a scale (as `metriplex train` does), the pairs are made in the training dtype
+        # (float32 halves the memory of large data); without, in float64 to compute it.
+        train_pairs = train_data.pairs(None if scale is None else dtype)
         valid_pairs = None if valid_data is None else valid_data.pairs()
     else:
         train_pairs, _ = as_pairs(data)
@@ -176,8 +168,6 @@ def fit(
     check_pairs(train_pairs, n, "training")
     if valid_pairs is not None:
         check_pairs(valid_pairs, n, "validation")
-    if dtype is None:
-        dtype = float_dtype(model, default=jnp.float32)
     if scale is None:
         d = state_scale(train_pairs.x0)
         scale = d / time_scale(train_pairs, d)
@@ -196,16 +186,20 @@ def fit(
     n_train = len(train_pairs)
     bsz = min(batch_size, n_train)
     shard = batch_sharding(data_parallel, bsz)
-    full_train = to_batch(train_pairs, np.arange(n_train), scale, dtype)
+    full_train = to_batch(train_pairs, None, scale, dtype)
     run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard))
 
     @eqx.filter_jit
     def evaluate(params, batch, key):
         return loss(eqx.combine(params, static), batch, key=key)
 
-    def eval_pairs(params, pairs: Pairs, key) -> tuple[float, dict[str, float]]:
-        idx = spread(len(pairs), 4096)  # one compiled shape, a stable signal
-        total, parts = evaluate(params, to_batch(pairs, idx, scale, dtype), key)
+    # Evaluations see fixed spread subsets; the host pairs are dropped (large data: memory).
+    train_eval = to_batch(train_pairs, spread(n_train, 4096), scale, dtype)
+    valid_eval = None if valid_pairs is None else to_batch(
+        valid_pairs, spread(len(valid_pairs), 4096), scale, dtype)
+
+    def eval_pairs(params, batch, key) -> tuple[float, dict[str, float]]:
+        total, parts = evaluate(params, batch, key)
         return float(total), {k: float(v) for k, v in parts.items()}
 
     windows = None
@@ -213,6 +207,7 @@ def fit(
         windows = rollout_check.prepare(valid_data, dtype)
         scheme = scheme_of(loss)
         state_units = state_scale(np.concatenate([train_pairs.x0, valid_data.x]))
+    del train_pairs, valid_pairs
 
     key, eval_key = jr.split(key)
     state = TrainState.start(params, opt_state, key, learning_rate)
@@ -256,9 +251,9 @@ def fit(
         if state.done > 0:
             tr_total, tr_parts = state.train_value, state.train_parts
         else:
-            tr_total, tr_parts = eval_pairs(state.params, train_pairs, eval_key)
-        if valid_pairs is not None:
-            va_total, va_parts = eval_pairs(state.params, valid_pairs, eval_key)
+            tr_total, tr_parts = eval_pairs(state.params, train_eval, eval_key)
+        if valid_eval is not None:
+            va_total, va_parts = eval_pairs(state.params, valid_eval, eval_key)
         else:
             va_total, va_parts = tr_total, {}
         history.step.append(state.done)
@@ -339,7 +334,9 @@ def fit(
         nonlocal bar
         solver, chunk = make_lbfgs_chunk(loss, static)
         chunk = eqx.filter_jit(chunk)
-        pairs = to_batch(train_pairs, spread(len(train_pairs), lbfgs_pairs), scale, dtype)
+        idx = jnp.asarray(spread(n_train, lbfgs_pairs))
+        pairs = full_train._replace(x0=full_train.x0[idx], x1=full_train.x1[idx],
+                                    dt=full_train.dt[idx])
         state.params = state.best_params
         opt_state = solver.init(state.params)
         bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",
@@ -357,7 +354,7 @@ def fit(
                 done += length
                 state.done += length
                 bar.update(length)
-                state.train_value, state.train_parts = eval_pairs(state.params, train_pairs,
+                state.train_value, state.train_parts = eval_pairs(state.params, train_eval,
                                                                   eval_key)
                 record_evaluation()
                 if max_seconds is not None and history.time[-1] >= max_seconds:

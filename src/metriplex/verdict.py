@@ -248,7 +248,7 @@ def train_reference(data: Trajectories, *, width: int = 64, depth: int = 2, step
 
     train, _ = data.split(validation, seed=seed)
     d = state_scale(train.x)
-    rate = d / time_scale(train.pairs(), d)
+    rate = d / time_scale(train, d)
     dtype = jnp.zeros(()).dtype if dtype is None else dtype
     box = BlackBoxModel(data.n, width=width, depth=depth, data=train.x, rate=rate,
                         key=jr.key(seed))
@@ -316,7 +316,7 @@ def verdict(
     train, valid = data.split(reference.validation, seed=reference.seed)
     held = valid if valid is not None else train
     d = state_scale(train.x)
-    rate = d / time_scale(train.pairs(), d)
+    rate = d / time_scale(train, d)
     box, box_note = reference.model, reference.note
     pairs = held.pairs()
     rates = (pairs.x1 - pairs.x0) / pairs.dt[:, None] / rate[None, :]
