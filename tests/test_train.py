@@ -26,9 +26,13 @@ def _rollout_error(model, data):
 
 
 def test_fit_learns_damped_oscillator_far_better_than_untrained():
-    truth = damped_oscillator()
-    data = make_data(truth, oscillator_x0(24), 0.1, 40, names=("q", "p", "s"))
-    test = make_data(truth, oscillator_x0(3, seed=9), 0.1, 60, names=("q", "p", "s"))
+    # 24 training trajectories of 40 steps and 3 test trajectories of 60 steps from other
+    # initial states, simulated together (one compiled rollout of the true model, not two).
+    ts = np.arange(61) * 0.1
+    x0 = np.concatenate([oscillator_x0(24), oscillator_x0(3, seed=9)])
+    xs = np.asarray(mx.simulate(damped_oscillator(), jnp.asarray(x0), jnp.asarray(ts)))
+    data = mx.Trajectories.from_arrays(ts[:41], xs[:24, :41], ("q", "p", "s"))
+    test = mx.Trajectories.from_arrays(ts, xs[24:], ("q", "p", "s"))
     k = jr.split(jr.key(0), 2)
     model = mx.GenericModel(
         mx.MLPPotential(3, width=32, data=data.x, key=k[0]),
@@ -85,16 +89,10 @@ def test_divergence_is_reported_and_best_model_kept():
     assert np.all(np.isfinite(np.asarray(jnp.stack([best.vector_field(xi) for xi in x]))))
 
 
-def _cli(*args, **kw):
-    return subprocess.run([sys.executable, "-m", "metriplex", *args], capture_output=True,
-                          text=True, cwd=kw.get("cwd"), env=kw.get("env"),
-                          timeout=kw.get("timeout", 600))
-
-
 # The interrupted run: `metriplex train` whose process SIGKILLs itself right after writing the
-# checkpoint at step KILL_AT (of 1200): a real kill in mid-run (no cleanup, the lock left
+# checkpoint at step KILL_AT (of STEPS): a real kill in mid-run (no cleanup, the lock left
 # behind, no model), at a step fixed in advance rather than after a guessed sleep.
-KILL_AT = 600
+STEPS, KILL_AT = 400, 200
 KILLED_TRAIN = textwrap.dedent(
     f"""
     import os, signal, sys
@@ -113,6 +111,17 @@ KILLED_TRAIN = textwrap.dedent(
     """
 )
 
+#: The runs of the resume and Ctrl-C tests: the same data and options, so that they compile the
+#: same programs (shared through the suite's compilation cache, see conftest.py).
+RUN_OPTS = ["--entropy", "sum:2", "--poisson", "canonical:1", "--eval-every", "50",
+            "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64"]
+
+
+def _run_data(tmp_path):
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
+    mx.write(tmp_path / "d.npz", data)
+    return data
+
 
 def _checkpoint_step(path) -> int:
     with open(path, "rb") as f:
@@ -121,29 +130,27 @@ def _checkpoint_step(path) -> int:
 
 
 def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
-    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
-    mx.write(tmp_path / "d.npz", data)
-    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "1200", "--eval-every",
-            "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64", "--float64",
-            "--quiet"]
-    # The three processes compile the same programs: a compilation cache (the suite's, see
-    # conftest.py, else one in this test's folder) spares the second and third the compiling;
-    # results do not depend on it.
+    from metriplex.cli import main
+
+    data = _run_data(tmp_path)
+    opts = [*RUN_OPTS, "--steps", str(STEPS), "--quiet"]
+    # Only the interrupted run needs a process of its own (to be killed); the uninterrupted run
+    # and the resumed one run here. The killed process compiles the programs that this one
+    # does: a compilation cache (the suite's, see conftest.py, else one in this test's folder)
+    # spares it the compiling; results do not depend on it.
     env = dict(os.environ)
     if "JAX_COMPILATION_CACHE_DIR" not in env:
         env.update(JAX_COMPILATION_CACHE_DIR=str(tmp_path / "jax-cache"),
                    JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
-    full = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts, env=env)
-    assert full.returncode == 0, full.stderr
+    assert main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts]) == 0
     cut = subprocess.run([sys.executable, "-c", KILLED_TRAIN, "train", str(tmp_path / "d.npz"),
                           "--out", str(tmp_path / "cut"), *opts],
                          capture_output=True, text=True, env=env, timeout=600)
     assert cut.returncode == -signal.SIGKILL, (cut.returncode, cut.stderr)
     assert not (tmp_path / "cut" / "model.mpx").exists(), "the run finished before the kill"
     assert _checkpoint_step(tmp_path / "cut" / "checkpoint.ckpt") == KILL_AT
-    resumed = _cli("train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume",
-                   *opts, env=env)
-    assert resumed.returncode == 0, resumed.stderr
+    assert main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume",
+                 *opts]) == 0
     a = mx.load(tmp_path / "full")
     b = mx.load(tmp_path / "cut")
     x = jnp.asarray(data.x[:10])
@@ -152,15 +159,13 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     np.testing.assert_allclose(fa, fb, rtol=1e-9, atol=1e-12)
     ha = json.loads((tmp_path / "full" / "history.json").read_text())
     hb = json.loads((tmp_path / "cut" / "history.json").read_text())
-    assert ha["step"] == hb["step"]
+    assert ha["step"] == hb["step"] and ha["step"][-1] == STEPS
     np.testing.assert_allclose(ha["valid"]["total"], hb["valid"]["total"], rtol=1e-9)
 
 
 def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
-    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 40)
-    mx.write(tmp_path / "d.npz", data)
-    opts = ["--entropy", "sum:2", "--poisson", "canonical:1", "--steps", "50000000", "--eval-every",
-            "50", "--checkpoint-every", "1", "--width", "8", "--batch-size", "64"]
+    _run_data(tmp_path)
+    opts = [*RUN_OPTS, "--steps", "50000000"]
     # pytest-xdist workers ignore SIGINT, and a child inherits an ignored signal: start the
     # training process with the default disposition, so it gets Python's KeyboardInterrupt as
     # in a terminal.

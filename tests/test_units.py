@@ -43,26 +43,33 @@ def test_units_put_the_learned_energy_on_the_scale_of_the_given_bracket():
     assert slow.energy == pytest.approx(u.energy / 1e3, rel=1e-12)
 
 
+CONFIG = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural", width=16,
+                   float64=True)
+
+
+def _fit(d, time_factor):
+    """The history and the learned vector field (in the units of ``_data()``) of a short fit."""
+    units = units_for(CONFIG, d)
+    model = build_model(CONFIG, d, key=jr.key(0), units=units)
+    # lr 3e-3: at 1e-2 rounding differences (1e-16) grow to 1e-3 within 300 steps.
+    model, history = mx.fit(model, d, loss=build_loss(CONFIG, units), steps=300,
+                            learning_rate=3e-3, eval_every=100, scale=units.rate, progress=False,
+                            rollout_check=None, key=jr.key(1))
+    # The vector field in the data's own units, mapped back to the first data's units.
+    f = np.stack([np.asarray(model.vector_field(x)) for x in d.x[:20]])
+    return history, f * time_factor
+
+
+@pytest.fixture(scope="module")
+def fit_in_the_first_units():
+    """The fit on the data as generated, which both other units are compared with."""
+    return _fit(_data(), 1.0)
+
+
 @pytest.mark.parametrize("time_factor, offset", [(1e3, (0.0, 0.0, 0.0)), (1.0, (1e3, 0.0, -1e3))])
-def test_training_is_the_same_in_other_units(time_factor, offset):
-    data = _data()
-    other = _transformed(data, time_factor, offset)
-    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural", width=16,
-                       float64=True)
-    histories, fields = [], []
-    for d, factor in ((data, 1.0), (other, time_factor)):
-        units = units_for(config, d)
-        model = build_model(config, d, key=jr.key(0), units=units)
-        # lr 3e-3: at 1e-2 rounding differences (1e-16) grow to 1e-3 within 300 steps.
-        model, history = mx.fit(model, d, loss=build_loss(config, units), steps=300,
-                                learning_rate=3e-3,
-                                eval_every=100, scale=units.rate, progress=False,
-                                rollout_check=None, key=jr.key(1))
-        histories.append(history)
-        # The vector field in the data's own units, mapped back to the first data's units.
-        f = np.stack([np.asarray(model.vector_field(x)) for x in d.x[:20]])
-        fields.append(f * factor)
-    a, b = histories
+def test_training_is_the_same_in_other_units(fit_in_the_first_units, time_factor, offset):
+    a, f0 = fit_in_the_first_units
+    b, f1 = _fit(_transformed(_data(), time_factor, offset), time_factor)
     assert a.valid["total"][-1] < a.valid["total"][0] / 5  # it did learn something
     np.testing.assert_allclose(a.valid["total"], b.valid["total"], rtol=1e-5)
-    np.testing.assert_allclose(fields[0], fields[1], rtol=1e-4, atol=1e-6 * np.abs(fields[0]).max())
+    np.testing.assert_allclose(f0, f1, rtol=1e-4, atol=1e-6 * np.abs(f0).max())
