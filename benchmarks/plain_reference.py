@@ -167,7 +167,7 @@ from metriplex.data import Trajectories  # noqa: E402
 from metriplex.io import read, write  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
-from metriplex._train import adjustable_optimizer, make_chunk, to_batch  # noqa: E402
+from metriplex._train import PairRows, PairStore, adjustable_optimizer, make_chunk  # noqa: E402
 from metriplex.structure.poisson import CanonicalPoisson, SkewMLPPoisson  # noqa: E402
 from metriplex.structure.potential import MLPPotential, SumOf  # noqa: E402
 from metriplex.structure.friction import CholeskyFriction  # noqa: E402
@@ -381,8 +381,8 @@ class FitChunk:
         opt = adjustable_optimizer(lr)
         self.length = length
         self.fn = eqx.filter_jit(make_chunk(loss, opt, static, batch))
-        self.full = to_batch(pairs, np.arange(len(pairs)), np.asarray(rate, np.float64),
-                             jnp.float32)
+        self.full = PairStore.of(PairRows.of(pairs, None, "benchmark"),
+                                 np.asarray(rate, np.float64), jnp.float32)
         self.state = (params, opt.init(params), jr.key(2))
 
     def run(self, steps: int) -> tuple[float, int]:

@@ -71,9 +71,8 @@ import metriplex as mx  # noqa: E402
 from metriplex.config import RunConfig, build_loss, build_model, preset  # noqa: E402
 from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
-from metriplex.losses import Batch  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
-from metriplex._train import default_optimizer, make_chunk  # noqa: E402
+from metriplex._train import PairRows, PairStore, default_optimizer, make_chunk  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN = "<!-- benchmarks/run.py: generated results begin -->"
@@ -230,11 +229,7 @@ def compile_train_step(model_name: str, jac: str, batch: int, dtype, length: int
     model = build_model(config, data, key=jr.key(0))
     model = with_dtype(model, dtype)
     loss = build_loss(config)
-    pairs = data.pairs()
-    full = Batch(
-        jnp.asarray(pairs.x0, dtype), jnp.asarray(pairs.x1, dtype), jnp.asarray(pairs.dt, dtype),
-        jnp.asarray(state_scale(data.x), dtype),
-    )
+    full = PairStore.of(PairRows.of(data, None, "benchmark"), state_scale(data.x), dtype)
     optimizer = default_optimizer(config.lr, 10_000)
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)

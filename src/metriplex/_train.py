@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 import equinox as eqx
 import jax
@@ -125,28 +125,35 @@ def with_learning_rate(opt_state, learning_rate: float):
 
 
 def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static, batch_size: int,
-               shard: Callable[[Batch], Batch] | None = None):
+               shard: Callable[[Batch], Batch] | None = None, noise=None):
     """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
     runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
-    ``full_train`` (a :class:`~metriplex.losses.Batch` of all training pairs), and returns
+    ``full_train`` (a :class:`PairStore` of all training pairs), and returns
     ``(params, opt_state, mean loss, mean loss terms)``.
 
     The training pairs are an argument, not a closed-over constant, so the data set is not
     embedded in the compiled program and the chunk can be timed on its own
     (``benchmarks/run.py`` times exactly this step).
+
+    ``noise`` (per-variable standard deviations, or ``None``) perturbs both states of every
+    pair by one Gaussian draw: the pair's difference, the target, is kept, and the field is
+    asked to produce it near the data as well as on it.
     """
     def loss_fn(p, batch, k):
         return loss(eqx.combine(p, static), batch, key=k)
 
     def chunk(params, opt_state, key, length, full_train):
-        n_train = full_train.x0.shape[0]
+        n_train = full_train.first.shape[0]
 
         def one(carry, k):
             params, opt_state = carry
             kb, kl = jr.split(k)
             idx = jr.randint(kb, (batch_size,), 0, n_train)
-            batch = Batch(full_train.x0[idx], full_train.x1[idx], full_train.dt[idx],
-                          full_train.scale)
+            batch = full_train.take(idx)
+            if noise is not None:
+                kn = jr.fold_in(kl, 1)
+                eps = jr.normal(kn, batch.x0.shape, batch.x0.dtype) * noise[None, :]
+                batch = batch._replace(x0=batch.x0 + eps, x1=batch.x1 + eps)
             if shard is not None:
                 batch = shard(batch)
             (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
@@ -256,44 +263,104 @@ class TrainState:
         )
 
 
-def as_pairs(data) -> tuple[Pairs, Trajectories | None]:
-    if isinstance(data, Trajectories):
-        return data.pairs(), data
-    if isinstance(data, Pairs):
-        return data, None
-    if isinstance(data, tuple) and len(data) == 3:
-        return Pairs(*(np.asarray(a) for a in data)), None
-    raise MetriplexError(
-        f"fit needs Trajectories, Pairs or a tuple (x0, x1, dt); got {type(data).__name__}."
-    )
+class PairRows(NamedTuple):
+    """Data pairs as rows of one state array (host side): pair ``k`` is
+    ``(x[first[k]], x[second[k]])`` over ``dt[k]``. Consecutive samples of a trajectory share
+    their row, so trajectory data cost their states once, not twice."""
 
+    x: np.ndarray  # (N, n)
+    first: np.ndarray  # (P,) int
+    second: np.ndarray  # (P,) int
+    dt: np.ndarray  # (P,)
 
-def check_pairs(p: Pairs, n: int | None, what: str) -> None:
-    if p.x0.ndim != 2 or p.x0.shape != p.x1.shape or p.dt.shape != p.x0.shape[:1]:
-        raise MetriplexError(
-            f"{what} pairs need x0, x1 of shape (N, n) and dt of shape (N,); got "
-            f"{p.x0.shape}, {p.x1.shape}, {p.dt.shape}."
-        )
-    if len(p) == 0:
-        raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
-    if n is not None and p.x0.shape[1] != n:
-        raise MetriplexError(
-            f"the data have {p.x0.shape[1]} state variables but the model expects {n}; build the "
-            f"model for {p.x0.shape[1]} variables or select matching columns."
-        )
-    if np.any(~np.isfinite(p.dt)) or np.any(p.dt <= 0):
-        raise MetriplexError(
-            f"every dt must be finite and > 0; {what} data have dt = "
-            f"{p.dt[(~np.isfinite(p.dt)) | (p.dt <= 0)][:3]}. Sort samples by time and drop "
-            "duplicates."
-        )
-    for a in (p.x0, p.x1):
-        if not np.all(np.isfinite(a)):
+    @property
+    def count(self) -> int:
+        return int(self.first.shape[0])
+
+    @classmethod
+    def of(cls, data, n: int | None, what: str) -> "PairRows":
+        """The pairs of ``data`` (:class:`Trajectories`, :class:`Pairs` or ``(x0, x1, dt)``),
+        checked: shapes, ``n`` variables, finite states, finite positive steps."""
+        if isinstance(data, Trajectories):
+            same = data.trajectory[1:] == data.trajectory[:-1]
+            first = np.flatnonzero(same)
+            rows = cls(data.x, first, first + 1, np.diff(data.t)[same])
+        elif isinstance(data, Pairs) or (isinstance(data, tuple) and len(data) == 3):
+            x0, x1, dt = (np.asarray(a) for a in data)
+            if x0.ndim != 2 or x0.shape != x1.shape or dt.shape != x0.shape[:1]:
+                raise MetriplexError(
+                    f"{what} pairs need x0, x1 of shape (N, n) and dt of shape (N,); got "
+                    f"{x0.shape}, {x1.shape}, {dt.shape}."
+                )
+            k = np.arange(len(dt))
+            rows = cls(np.concatenate([x0, x1]), k, k + len(dt), dt)
+        else:
+            raise MetriplexError(
+                f"fit needs Trajectories, Pairs or a tuple (x0, x1, dt); got "
+                f"{type(data).__name__}."
+            )
+        index = np.int32 if len(rows.x) < 2**31 - 1 else np.int64
+        rows = rows._replace(first=rows.first.astype(index), second=rows.second.astype(index))
+        rows.check(n, what)
+        return rows
+
+    def check(self, n: int | None, what: str) -> None:
+        if self.count == 0:
+            raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
+        if n is not None and self.x.shape[1] != n:
+            raise MetriplexError(
+                f"the data have {self.x.shape[1]} state variables but the model expects {n}; "
+                f"build the model for {self.x.shape[1]} variables or select matching columns."
+            )
+        bad = ~np.isfinite(self.dt) | (self.dt <= 0)
+        if np.any(bad):
+            raise MetriplexError(
+                f"every dt must be finite and > 0; {what} data have dt = {self.dt[bad][:3]}. "
+                "Sort samples by time and drop duplicates."
+            )
+        if not np.all(np.isfinite(self.x)):
             raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
+
+    def batch(self, idx, scale, dtype) -> Batch:
+        """The pairs ``idx`` (a few thousand: evaluation subsets) as a :class:`Batch`."""
+        idx = np.asarray(idx)
+
+        def put(a):
+            return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))
+
+        return Batch(put(self.x[self.first[idx]]), put(self.x[self.second[idx]]),
+                     put(self.dt[idx]), jnp.asarray(scale, dtype))
+
+
+class PairStore(NamedTuple):
+    """All training pairs on device, as :class:`PairRows` hold them (the states once, two
+    index arrays); :meth:`take` gathers a minibatch inside the compiled step."""
+
+    x: jax.Array
+    first: jax.Array
+    second: jax.Array
+    dt: jax.Array
+    scale: jax.Array
+
+    @classmethod
+    def of(cls, rows: PairRows, scale, dtype) -> "PairStore":
+        def put(a):
+            return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
+
+        return cls(put(rows.x), jnp.asarray(rows.first), jnp.asarray(rows.second),
+                   put(rows.dt), jnp.asarray(scale, dtype))
+
+    @property
+    def count(self) -> int:
+        return int(self.first.shape[0])
+
+    def take(self, idx) -> Batch:
+        return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
+                     self.scale)
 
 
 def check_arguments(*, steps, batch_size, eval_every, learning_rate, patience, lbfgs_steps,
-                    lbfgs_pairs) -> None:
+                    lbfgs_pairs, input_noise) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
     if steps < 0 or batch_size < 1 or eval_every < 1:
         raise MetriplexError(
@@ -309,21 +376,17 @@ def check_arguments(*, steps, batch_size, eval_every, learning_rate, patience, l
             f"need lbfgs_steps >= 0 and lbfgs_pairs >= 1; got lbfgs_steps={lbfgs_steps}, "
             f"lbfgs_pairs={lbfgs_pairs}."
         )
+    if not 0 <= input_noise < 1:
+        raise MetriplexError(
+            f"input_noise must be in [0, 1) (a fraction of each variable's standard "
+            f"deviation); got {input_noise}."
+        )
 
 
 def spread(m: int, k: int) -> np.ndarray:
     """Indices of all ``m`` items when ``m <= k``, else of ``k`` evenly spread ones (a fixed
     subset: one compiled shape, the same items at every evaluation)."""
     return np.arange(m) if m <= k else np.linspace(0, m - 1, k).astype(int)
-
-
-def to_batch(pairs: Pairs, idx, scale, dtype) -> Batch:
-    """The pairs ``idx`` (``None``: all, without an indexed copy) as arrays of ``dtype``."""
-    def take(a):
-        a = a if idx is None else a[idx]
-        return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
-
-    return Batch(take(pairs.x0), take(pairs.x1), take(pairs.dt), jnp.asarray(scale, dtype))
 
 
 def batch_sharding(enabled: bool, batch_size: int):

@@ -102,6 +102,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--lbfgs-steps", type=int, help="iterations of an L-BFGS finish on a fixed "
                    "batch of up to 8192 training pairs after the Adam stage, kept only where "
                    f"the held-out rollouts improve (default {d.lbfgs_steps}; 0 for none)")
+    w.add_argument("--input-noise", type=float, metavar="FRACTION", help="Gaussian noise on "
+                   "both states of every training pair, as a fraction of each variable's "
+                   f"standard deviation (default {d.input_noise}; 0 for none)")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")
@@ -225,6 +228,7 @@ def cmd_train(args) -> None:
             validation_ids=validation_ids, source={"file": str(args.data), "dt": args.dt},
         )
         target = valid if valid is not None else train
+        del data, train  # the evaluation holds only what it rolls out (large data: memory)
         metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
                                progress=not args.quiet)
         metrics["train_seconds"] = seconds

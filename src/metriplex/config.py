@@ -85,6 +85,7 @@ class RunConfig:
     checkpoint_every: int = 10
     data_parallel: bool = False
     lbfgs_steps: int = 0
+    input_noise: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -472,6 +473,11 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(
             f"--lbfgs-steps must be >= 0 (iterations of the L-BFGS finish; 0 for none); got "
             f"{config.lbfgs_steps}."
+        )
+    if not 0 <= config.input_noise < 1:
+        raise MetriplexError(
+            f"--input-noise must be in [0, 1) (a fraction of each variable's standard "
+            f"deviation; 0 for none); got {config.input_noise}."
         )
     if config.schedule not in SCHEDULES:
         raise MetriplexError(

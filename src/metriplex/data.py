@@ -17,13 +17,26 @@ import numpy as np
 from ._errors import MetriplexError
 
 
-def state_scale(x: np.ndarray) -> np.ndarray:
-    """Per-variable standard deviation of states ``x`` (shape ``(N, n)``): the unit in which
-    losses, residuals and errors are measured. Columns that are constant (to 1e-12 of the
-    data's magnitude) get scale 1."""
-    x = np.asarray(x, dtype=np.float64)
-    s = x.std(axis=0)
-    return np.where(s > 1e-12 * max(float(np.abs(x).max()), 1.0), s, 1.0)
+def state_scale(*parts: np.ndarray) -> np.ndarray:
+    """Per-variable standard deviation of states (arrays of shape ``(N, n)``, all ``parts``
+    taken together): the unit in which losses, residuals and errors are measured. Columns that
+    are constant (to 1e-12 of the data's magnitude) get scale 1. Computed block by block in
+    float64 (Chan's pooled update), so large float32 data need no float64 copy."""
+    rows = 1 << 16
+    count, mean, m2, peak = 0, 0.0, 0.0, 0.0
+    for part in parts:
+        part = np.asarray(part)
+        for b in range(0, len(part), rows):
+            block = np.asarray(part[b : b + rows], dtype=np.float64)
+            k = len(block)
+            mu = block.mean(axis=0)
+            delta = mu - mean
+            mean = mean + delta * (k / (count + k))
+            m2 = m2 + ((block - mu) ** 2).sum(axis=0) + delta**2 * (count * k / (count + k))
+            count += k
+            peak = max(peak, float(np.abs(block).max()))
+    s = np.sqrt(m2 / count)
+    return np.where(s > 1e-12 * max(peak, 1.0), s, 1.0)
 
 
 def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -> float:

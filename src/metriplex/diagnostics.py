@@ -71,13 +71,17 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
 
 
 def _potential_along(model, fn, xs):
-    xs = jnp.asarray(xs, float_dtype(model))
-    return np.asarray(_map2(fn, xs), dtype=np.float64)
+    """``fn`` at every state of ``xs`` (shape ``(K, T, n)``), as ``(K, T)`` float64."""
+    xs = np.asarray(xs)
+    flat = jnp.asarray(xs.reshape(-1, xs.shape[-1]), float_dtype(model))
+    return np.asarray(_map_states(fn, flat), dtype=np.float64).reshape(xs.shape[:-1])
 
 
 @eqx.filter_jit
-def _map2(fn, xs):
-    return jax.vmap(jax.vmap(fn))(xs)
+def _map_states(fn, xs):
+    # In blocks of states: the networks' hidden layers for 1e5 states at once would hold
+    # more memory than the data (vmap inside, a sequential map over the blocks).
+    return jax.lax.map(fn, xs, batch_size=4096)
 
 
 def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256,

@@ -220,6 +220,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             resume=resume,
             data_parallel=config.data_parallel,
             lbfgs_steps=config.lbfgs_steps,
+            input_noise=config.input_noise,
             key=fit_key,
         )
     except TrainingDiverged as e:

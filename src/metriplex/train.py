@@ -31,17 +31,16 @@ from ._train import (
     is_adjustable,
     learning_rate_of,
     make_chunk,
-    as_pairs,
+    PairRows,
+    PairStore,
     batch_sharding,
     check_arguments,
-    check_pairs,
     make_lbfgs_chunk,
     spread,
-    to_batch,
     with_learning_rate,
 )
 from ._validate import Plateau, RolloutCheck, rollout_score, scheme_of
-from .data import Trajectories, state_scale, time_scale
+from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
 from .losses import CrankNicolsonResidual, Loss
 
@@ -75,6 +74,7 @@ def fit(
     data_parallel: bool = False,
     lbfgs_steps: int = 0,
     lbfgs_pairs: int = 8192,
+    input_noise: float = 0.0,
     key,
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
@@ -139,6 +139,9 @@ def fit(
         of up to ``lbfgs_pairs`` fixed training pairs (evenly spread), evaluated every
         ``eval_every`` iterations; its model is kept only where the validation score improves.
         0 (default) for none.
+    input_noise:
+        Standard deviation of Gaussian noise added to both states of every training pair, as a
+        fraction of each variable's standard deviation (default 0: none).
 
     ```python
     model, history = fit(model, data, key=jr.key(0))
@@ -146,31 +149,25 @@ def fit(
     """
     check_arguments(steps=steps, batch_size=batch_size, eval_every=eval_every,
                     learning_rate=learning_rate, patience=patience, lbfgs_steps=lbfgs_steps,
-                    lbfgs_pairs=lbfgs_pairs)
+                    lbfgs_pairs=lbfgs_pairs, input_noise=input_noise)
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
     n = getattr(model, "n", None) or model_size(model)
-    valid_pairs = None
     valid_data = None
     dtype = float_dtype(model, default=jnp.float32) if dtype is None else dtype
+    train_data = data
     if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
         train_data, valid_data = data.split(float(validation), seed=seed_split)
-        # Given a scale (as `metriplex train` does), the pairs are made in the training dtype
-        # (float32 halves the memory of large data); without, in float64 to compute it.
-        train_pairs = train_data.pairs(None if scale is None else dtype)
-        valid_pairs = None if valid_data is None else valid_data.pairs()
-    else:
-        train_pairs, _ = as_pairs(data)
-        if isinstance(validation, Trajectories):
-            valid_data = validation
-            valid_pairs = validation.pairs()
-    check_pairs(train_pairs, n, "training")
-    if valid_pairs is not None:
-        check_pairs(valid_pairs, n, "validation")
+    elif isinstance(validation, Trajectories):
+        valid_data = validation
+    # The pairs are rows of the states (no copy of them), checked once.
+    train_rows = PairRows.of(train_data, n, "training")
+    valid_rows = None if valid_data is None else PairRows.of(valid_data, n, "validation")
     if scale is None:
-        d = state_scale(train_pairs.x0)
-        scale = d / time_scale(train_pairs, d)
+        d = state_scale(train_rows.x)
+        scale = d / time_scale(train_data if isinstance(train_data, Trajectories)
+                               else Pairs(*(np.asarray(a) for a in train_data)), d)
     scale = np.asarray(scale, dtype=np.float64)
     model = with_dtype(model, dtype)
 
@@ -183,20 +180,23 @@ def fit(
     params, static = eqx.partition(model, eqx.is_inexact_array)
     opt_state = optimizer.init(params)
     adjustable = stopping is not None and is_adjustable(opt_state)
-    n_train = len(train_pairs)
+    n_train = train_rows.count
     bsz = min(batch_size, n_train)
     shard = batch_sharding(data_parallel, bsz)
-    full_train = to_batch(train_pairs, None, scale, dtype)
-    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard))
+    full_train = PairStore.of(train_rows, scale, dtype)
+    noise = None
+    if input_noise > 0:
+        noise = jnp.asarray(input_noise * state_scale(train_rows.x), dtype)
+    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard, noise))
 
     @eqx.filter_jit
     def evaluate(params, batch, key):
         return loss(eqx.combine(params, static), batch, key=key)
 
-    # Evaluations see fixed spread subsets; the host pairs are dropped (large data: memory).
-    train_eval = to_batch(train_pairs, spread(n_train, 4096), scale, dtype)
-    valid_eval = None if valid_pairs is None else to_batch(
-        valid_pairs, spread(len(valid_pairs), 4096), scale, dtype)
+    # Evaluations see fixed spread subsets of the pairs.
+    train_eval = train_rows.batch(spread(n_train, 4096), scale, dtype)
+    valid_eval = None if valid_rows is None else valid_rows.batch(
+        spread(valid_rows.count, 4096), scale, dtype)
 
     def eval_pairs(params, batch, key) -> tuple[float, dict[str, float]]:
         total, parts = evaluate(params, batch, key)
@@ -206,8 +206,8 @@ def fit(
     if rollout_check is not None and valid_data is not None:
         windows = rollout_check.prepare(valid_data, dtype)
         scheme = scheme_of(loss)
-        state_units = state_scale(np.concatenate([train_pairs.x0, valid_data.x]))
-    del train_pairs, valid_pairs
+        state_units = state_scale(train_rows.x, valid_data.x)
+    del train_rows, valid_rows, train_data
 
     key, eval_key = jr.split(key)
     state = TrainState.start(params, opt_state, key, learning_rate)
@@ -334,9 +334,7 @@ def fit(
         nonlocal bar
         solver, chunk = make_lbfgs_chunk(loss, static)
         chunk = eqx.filter_jit(chunk)
-        idx = jnp.asarray(spread(n_train, lbfgs_pairs))
-        pairs = full_train._replace(x0=full_train.x0[idx], x1=full_train.x1[idx],
-                                    dt=full_train.dt[idx])
+        pairs = full_train.take(jnp.asarray(spread(n_train, lbfgs_pairs)))
         state.params = state.best_params
         opt_state = solver.init(state.params)
         bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",

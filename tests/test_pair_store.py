@@ -1,0 +1,97 @@
+"""Training pairs held once (states plus row indices), the pooled state scale, and input noise."""
+
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex._errors import MetriplexError
+from metriplex._train import PairRows, PairStore
+from metriplex.config import RunConfig, validate
+from metriplex.data import Pairs, Trajectories, state_scale
+from helpers import damped_oscillator, make_data, oscillator_x0
+
+
+def _ragged() -> Trajectories:
+    rng = np.random.default_rng(0)
+    rows = [(k, t, rng.normal(size=3)) for k, T in ((3, 5), (7, 2), (1, 4)) for t in range(T)]
+    return Trajectories(
+        x=np.array([r[2] for r in rows]),
+        t=np.array([0.1 * r[1] * (1 + r[0]) for r in rows]),
+        trajectory=np.array([r[0] for r in rows]),
+    )
+
+
+def test_pair_rows_give_the_pairs_of_trajectories_without_copying_the_states():
+    data = _ragged()
+    rows = PairRows.of(data, 3, "training")
+    expected = data.pairs()
+    assert rows.count == len(expected) == 4 + 1 + 3  # no pair across trajectories
+    assert rows.x is data.x
+    np.testing.assert_array_equal(rows.x[rows.first], expected.x0)
+    np.testing.assert_array_equal(rows.x[rows.second], expected.x1)
+    np.testing.assert_array_equal(rows.dt, expected.dt)
+    store = PairStore.of(rows, np.ones(3), jnp.float64)
+    batch = store.take(jnp.array([6, 0, 6]))
+    np.testing.assert_array_equal(np.asarray(batch.x0), expected.x0[[6, 0, 6]])
+    np.testing.assert_array_equal(np.asarray(batch.x1), expected.x1[[6, 0, 6]])
+    np.testing.assert_array_equal(np.asarray(batch.dt), expected.dt[[6, 0, 6]])
+
+
+def test_pair_rows_of_ready_pairs_and_their_checks():
+    rng = np.random.default_rng(1)
+    x0, x1, dt = rng.normal(size=(5, 2)), rng.normal(size=(5, 2)), np.full(5, 0.1)
+    rows = PairRows.of(Pairs(x0, x1, dt), 2, "training")
+    np.testing.assert_array_equal(rows.x[rows.first], x0)
+    np.testing.assert_array_equal(rows.x[rows.second], x1)
+    with pytest.raises(MetriplexError, match="model expects 3"):
+        PairRows.of((x0, x1, dt), 3, "training")
+    with pytest.raises(MetriplexError, match=r"every dt must be finite and > 0"):
+        PairRows.of((x0, x1, -dt), 2, "training")
+    x1[2, 1] = np.nan
+    with pytest.raises(MetriplexError, match="validation data contain NaN"):
+        PairRows.of((x0, x1, dt), 2, "validation")
+    with pytest.raises(MetriplexError, match=r"dt of shape \(N,\)"):
+        PairRows.of((x0, x1, dt[:3]), 2, "training")
+
+
+def test_state_scale_pools_several_parts_block_by_block():
+    rng = np.random.default_rng(2)
+    # More rows than one block, a large offset, a tiny spread and a constant column.
+    x = rng.normal(size=(150_000, 3)) * np.array([2.0, 1e-3, 0.0]) + np.array([0.0, 1e4, 5.0])
+    expected = np.where(x.std(axis=0) > 0, x.std(axis=0), 1.0)
+    np.testing.assert_allclose(state_scale(x), expected, rtol=1e-9)
+    np.testing.assert_allclose(state_scale(x[:70_001], x[70_001:]), expected, rtol=1e-9)
+    assert state_scale(x)[2] == 1.0
+
+
+@pytest.fixture(scope="module")
+def data():
+    return make_data(damped_oscillator(), oscillator_x0(4), 0.1, 12, names=("q", "p", "s"))
+
+
+def _fit(data, **kwargs):
+    model = mx.GenericModel(
+        energy=mx.MLPPotential(3, width=8, key=jr.key(0)),
+        entropy=mx.SumOf((2,)), poisson=mx.CanonicalPoisson(3, pairs=1),
+        friction=mx.CholeskyFriction(3, width=8, key=jr.key(1)))
+    return mx.fit(model, data, steps=60, eval_every=20, stopping=None, rollout_check=None,
+                  progress=False, key=jr.key(2), **kwargs)
+
+
+def test_input_noise_perturbs_training_reproducibly(data):
+    _, plain = _fit(data)
+    _, noisy = _fit(data, input_noise=0.05)
+    _, again = _fit(data, input_noise=0.05)
+    # The first evaluation (step 0, untrained) is the same; the noise changes what follows.
+    assert plain.train["total"][0] == noisy.train["total"][0]
+    assert plain.train["total"][1:] != noisy.train["total"][1:]
+    assert noisy.train["total"] == again.train["total"]
+
+
+def test_input_noise_out_of_range_is_refused(data):
+    with pytest.raises(MetriplexError, match=r"input_noise must be in \[0, 1\).*got 1.5"):
+        _fit(data, input_noise=1.5)
+    with pytest.raises(MetriplexError, match=r"--input-noise must be in \[0, 1\).*got -0.1"):
+        validate(RunConfig(input_noise=-0.1), 3)
