@@ -3,7 +3,7 @@
 .. math:: \\dot x = L(x)\\nabla E(x) + M(x)\\nabla S(x),\\quad L\\nabla S = 0,\\ M\\nabla E = 0.
 """
 
-__version__ = "0.1.0"
+from ._version import __version__ as __version__
 
 from . import diagnostics as diagnostics
 from . import structure as structure

@@ -454,7 +454,7 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
 
 def save(path: str | os.PathLike, model: GenericModel, *, n: int, names=(), extra=None) -> None:
     """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle)."""
-    from . import __version__
+    from ._version import __version__
 
     header = {
         "format": "metriplex-model",
