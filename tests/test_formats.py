@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 
 import metriplex as mx
 from metriplex import MetriplexError, Trajectories
-from metriplex._formats import natural_key, read_mat, read_mat_operators, write_mat
+from metriplex.io import natural_key, read_mat, read_mat_operators, write_mat
 
 EXTS = ["npz", "csv", "h5", "hdf5", "mat"]
 

@@ -16,9 +16,9 @@ import scipy.io
 
 import metriplex as mx
 from metriplex._errors import MetriplexError
-from metriplex._formats import read_mat
 from metriplex.cli import main
 from metriplex.data import uniform_times
+from metriplex.io import read_mat
 
 
 def run(*args):

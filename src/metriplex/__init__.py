@@ -25,7 +25,7 @@ from .integrate import ImplicitMidpoint as ImplicitMidpoint
 from .integrate import Rollout as Rollout
 from .integrate import simulate as simulate
 from .integrate import solve as solve
-from ._formats import read_mat_operators as read_mat_operators
+from .io import read_mat_operators as read_mat_operators
 from .io import load as load
 from .io import read as read
 from .io import save as save

@@ -1,0 +1,95 @@
+"""The long table as NPZ, the native format: arrays ``trajectory`` (N,), ``t`` (N,), ``x``
+(N, n) and optionally ``names`` (n,) (docs/design.md, 'Trajectory data'). Nothing is unpickled.
+"""
+
+from __future__ import annotations
+
+import io as _io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .._errors import MetriplexError
+from ..data import Trajectories, uniform_times
+from ._files import atomic_write
+
+
+def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
+    """The long table from NPZ: ``trajectory`` (N,), ``t`` (N,), ``x`` (N, n), ``names`` (n,);
+    with ``dt``, ``t`` may be left out and is replaced by ``k * dt`` (see
+    :func:`metriplex.io.read`)."""
+    path = Path(path)
+    where = f"NPZ file {str(path)!r}"
+    # Our own handle: np.load leaks the one it opens when the archive is unreadable.
+    with open(path, "rb") as fh:
+        try:
+            z = np.load(fh, allow_pickle=False)
+        except Exception as e:  # zipfile/format errors differ by numpy version
+            raise MetriplexError(
+                f"{str(path)!r} is not a readable NPZ file ({type(e).__name__}: {e}). It may be "
+                "truncated or of another format; write it with metriplex.write or numpy.savez."
+            ) from None
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise MetriplexError(
+                f"{str(path)!r} holds one bare array of shape {z.shape}, not an NPZ archive; the "
+                "long table needs named arrays: np.savez(path, trajectory=..., t=..., x=..., "
+                "names=...)."
+            )
+        with z:
+            arrays = _npz_arrays(z, where, need_t=dt is None)
+    names = ()
+    if "names" in arrays:
+        raw = arrays["names"]
+        if raw.dtype.kind not in "US":
+            raise MetriplexError(
+                f"array `names` of {where} must hold strings; it holds {raw.dtype} values "
+                f"{raw.reshape(-1)[:5].tolist()}. Save np.array(names, dtype=str)."
+            )
+        names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in raw.reshape(-1))
+    t = arrays["t"] if dt is None else uniform_times(arrays["trajectory"], dt)
+    try:
+        return Trajectories(arrays["trajectory"], t, arrays["x"], names)
+    except MetriplexError as e:
+        raise MetriplexError(f"{where}: {e}") from None
+
+
+def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
+    found = sorted(z.files)
+    missing = [k for k in ("trajectory", "t", "x") if k not in found and (need_t or k != "t")]
+    if missing:
+        raise MetriplexError(
+            f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
+            f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
+        )
+    unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
+    if unknown:
+        raise MetriplexError(
+            f"{where} holds unknown array(s) {unknown}; the long table holds only "
+            "`trajectory`, `t`, `x` and `names`. If they are state variables, make them "
+            "columns of `x`; otherwise remove them."
+        )
+    arrays = {}
+    for k in found:
+        try:
+            arrays[k] = z[k]
+        except Exception as e:
+            if isinstance(e, ValueError) and "allow_pickle" in str(e):
+                raise MetriplexError(
+                    f"array `{k}` of {where} is stored as Python objects (pickle), which "
+                    "metriplex never loads because unpickling runs code. Save it as numbers, "
+                    "or names as strings: np.array(names, dtype=str)."
+                ) from None
+            raise MetriplexError(
+                f"array `{k}` of {where} is damaged ({type(e).__name__}: {e}); the file may be "
+                "truncated. Write it again."
+            ) from None
+    return arrays
+
+
+def write_npz(path: str | os.PathLike, data: Trajectories) -> None:
+    """Write ``data`` as the long table in NPZ (atomically)."""
+    buf = _io.BytesIO()
+    np.savez(buf, trajectory=data.trajectory, t=data.t, x=data.x, names=np.array(data.names))
+    with atomic_write(path, "wb") as f:
+        f.write(buf.getvalue())

@@ -1,0 +1,95 @@
+"""The one registry of trajectory formats, file suffix -> reader and writer (:data:`FORMATS`),
+and what goes through it: :func:`read`, :func:`write`, :func:`trajectory_suffixes`. A new
+format is one module in ``metriplex/io/`` (a reader that returns :class:`Trajectories` and a
+writer that takes them) and one line in :data:`FORMATS`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Callable
+
+from .._errors import MetriplexError
+from ..data import Trajectories, check_time_step
+from ._csv import read_csv, write_csv
+from ._hdf5 import read_hdf5, write_hdf5
+from ._mat import read_mat, write_mat
+from ._npz import read_npz, write_npz
+
+#: Each format: its suffixes (lower case), its reader and its writer.
+FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories], Callable[..., None]], ...] = (
+    ((".npz",), read_npz, write_npz),
+    ((".csv",), read_csv, write_csv),
+    ((".h5", ".hdf5"), read_hdf5, write_hdf5),
+    ((".mat",), read_mat, write_mat),
+)
+
+#: Suffix -> reader and suffix -> writer, from :data:`FORMATS`.
+READERS: dict[str, Callable[..., Trajectories]] = {s: r for ss, r, _ in FORMATS for s in ss}
+WRITERS: dict[str, Callable[..., None]] = {s: w for ss, _, w in FORMATS for s in ss}
+
+
+def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
+    """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``) or MATLAB
+    (``.mat``). Layouts: docs/design.md, 'Trajectory data', :mod:`metriplex.io._hdf5` and
+    :mod:`metriplex.io._mat`.
+
+    ``dt``: give every trajectory the uniform time grid ``t = k * dt`` (``k = 0, 1, ...`` in the
+    file's order of its samples) instead of the file's own times, which are then not read (a
+    file may lack them, or hold a time vector that does not fit its snapshots). The command
+    line's ``--dt``.
+
+    A malformed file raises :class:`MetriplexError` naming the file, the rule it breaks, the
+    value found and the fix.
+
+    ```python
+    data = mx.read("data.npz")
+    data = mx.read("database.mat", dt=0.01)
+    ```
+    """
+    if dt is not None:
+        dt = check_time_step(dt)
+    path = Path(path)
+    if not path.exists():
+        raise MetriplexError(f"data file {str(path)!r} does not exist; check the path.")
+    if path.is_dir():
+        raise MetriplexError(f"{str(path)!r} is a folder; give a data file (.npz, .csv, ...).")
+    if path.stat().st_size == 0:
+        raise MetriplexError(f"data file {str(path)!r} is empty; it holds no trajectories.")
+    suffix = path.suffix.lower()
+    if suffix not in READERS:
+        raise MetriplexError(
+            f"cannot read {str(path)!r}: unknown extension {suffix!r}. Supported: "
+            f"{', '.join(sorted(READERS))}."
+        )
+    try:
+        return READERS[suffix](path) if dt is None else READERS[suffix](path, dt=dt)
+    except MetriplexError as e:
+        if str(path) in str(e):
+            raise
+        raise MetriplexError(f"data file {str(path)!r}: {e}") from None
+
+
+def write(path: str | os.PathLike, data: Trajectories) -> None:
+    """Write trajectories, atomically: the long table (``.npz``, ``.csv``), HDF5 (``.h5``,
+    ``.hdf5``) or MATLAB (``.mat``). :func:`read` gives back the same trajectories exactly.
+    """
+    if not isinstance(data, Trajectories):
+        raise MetriplexError(
+            f"write() takes a Trajectories; got {type(data).__name__}. Build one with "
+            "Trajectories.from_list([(t, x), ...], names=...)."
+        )
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in WRITERS:
+        raise MetriplexError(
+            f"cannot write {str(path)!r}: unknown extension {suffix!r}. Trajectories are written "
+            f"as {', '.join(sorted(WRITERS))}."
+        )
+    WRITERS[suffix](path, data)
+
+
+def trajectory_suffixes() -> tuple[str, ...]:
+    """The file extensions :func:`write` writes trajectories as."""
+    return tuple(sorted(WRITERS))
