@@ -202,7 +202,7 @@ def test_casimir3_satisfies_jacobi_and_generic_does_not():
     t = _terms(ent, xs)
     assert float(jnp.max(jnp.abs(jnp.einsum("bij,bj->bi", t.poisson, t.grad_entropy)))) < 1e-12
     # epsilon_ijk convention: L v = v x w, so the rigid body L = -eps m is w = -m.
-    from metriplex.structure.poisson import _cross_matrix
+    from metriplex.structure.casimir import _cross_matrix
 
     w, v = jr.normal(jr.key(17), (2, 3))
     np.testing.assert_allclose(_cross_matrix(w) @ v, jnp.cross(v, w), atol=1e-15)

@@ -1,22 +1,22 @@
 """GENERIC building blocks: potentials (E, S), Poisson bivectors (L), friction matrices (M)."""
 
+from ._abstract import AbstractFriction as AbstractFriction
+from ._abstract import AbstractPoisson as AbstractPoisson
+from ._abstract import AbstractPotential as AbstractPotential
 from .constant import ConstantFriction as ConstantFriction
 from .constant import ConstantPoisson as ConstantPoisson
-from .friction import AbstractFriction as AbstractFriction
 from .friction import CholeskyFriction as CholeskyFriction
 from .friction import KnownFriction as KnownFriction
 from .friction import ProjectedCholeskyFriction as ProjectedCholeskyFriction
 from .friction import ZeroFriction as ZeroFriction
-from .poisson import AbstractPoisson as AbstractPoisson
 from .poisson import CanonicalPoisson as CanonicalPoisson
-from .poisson import CasimirPoisson3 as CasimirPoisson3
-from .poisson import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
+from .casimir import CasimirPoisson3 as CasimirPoisson3
+from .casimir import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .lie_poisson import LiePoisson as LiePoisson
 from .poisson import KnownPoisson as KnownPoisson
 from .poisson import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .poisson import SkewMLPPoisson as SkewMLPPoisson
 from .poisson import ZeroPoisson as ZeroPoisson
-from .potential import AbstractPotential as AbstractPotential
 from .potential import FeatureMap as FeatureMap
 from .potential import Known as Known
 from .potential import MLPPotential as MLPPotential

@@ -9,32 +9,16 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 
 from .._errors import MetriplexError
-from .._types import Matrix, State
+from ._abstract import AbstractFriction, AbstractPoisson
+from ._fixed import AbstractConstantMatrix, frozen, square_matrix
 from ._registry import register
-from .friction import AbstractFriction
-from .poisson import AbstractPoisson
-
-
-def _square(matrix, what: str) -> np.ndarray:
-    a = np.asarray(matrix, dtype=np.float64)
-    if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] < 1:
-        raise MetriplexError(f"{what} must be a square n x n matrix; got shape {a.shape}.")
-    if not np.all(np.isfinite(a)):
-        raise MetriplexError(f"{what} holds NaN or inf; every entry must be finite.")
-    return a
-
-
-def _frozen(a: np.ndarray) -> tuple[tuple[float, ...], ...]:
-    return tuple(tuple(float(v) for v in row) for row in a)
 
 
 @register("poisson", "constant")
-class ConstantPoisson(AbstractPoisson):
+class ConstantPoisson(AbstractConstantMatrix, AbstractPoisson):
     r"""A known constant Poisson matrix :math:`L` (antisymmetric; a constant bivector always
     satisfies the Jacobi identity).
 
@@ -46,11 +30,8 @@ class ConstantPoisson(AbstractPoisson):
     ```
     """
 
-    matrix: tuple[tuple[float, ...], ...] = eqx.field(static=True)
-    n: int = eqx.field(static=True)
-
     def __init__(self, matrix):
-        a = _square(matrix, "a constant Poisson matrix L")
+        a = square_matrix(matrix, "a constant Poisson matrix L")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a + a.T).max())
         if asym > 1e-8 * size:
@@ -59,35 +40,22 @@ class ConstantPoisson(AbstractPoisson):
                 f"max |L + L^T| = {asym:.3g} (entries up to {size:.3g}). Check that the file "
                 "holds L and not M, and its orientation."
             )
-        self.matrix = _frozen(0.5 * (a - a.T))
+        self.matrix = frozen(0.5 * (a - a.T))
         self.n = a.shape[0]
 
     uses_gradient: ClassVar[bool] = False
 
-    def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
-        return jnp.asarray(self.matrix, x.dtype)
-
-    def spec(self):
-        return {"kind": "constant", "matrix": [list(r) for r in self.matrix]}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(spec["matrix"])
-
 
 @register("friction", "constant")
-class ConstantFriction(AbstractFriction):
+class ConstantFriction(AbstractConstantMatrix, AbstractFriction):
     r"""A known constant friction matrix :math:`M` (symmetric positive semi-definite).
 
     An input that is symmetric up to rounding (relative ``1e-8``) is symmetrised; a larger
     asymmetry, or an eigenvalue below :math:`-10^{-8}\max|M|`, is an error.
     """
 
-    matrix: tuple[tuple[float, ...], ...] = eqx.field(static=True)
-    n: int = eqx.field(static=True)
-
     def __init__(self, matrix):
-        a = _square(matrix, "a constant friction matrix M")
+        a = square_matrix(matrix, "a constant friction matrix M")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a - a.T).max())
         if asym > 1e-8 * size:
@@ -103,17 +71,7 @@ class ConstantFriction(AbstractFriction):
                 f"a friction matrix must be positive semi-definite (dissipation >= 0); the given "
                 f"M has the eigenvalue {low:.3g}. Check its sign convention (M, not -M)."
             )
-        self.matrix = _frozen(sym)
+        self.matrix = frozen(sym)
         self.n = a.shape[0]
 
     uses_gradient: ClassVar[bool] = False
-
-    def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
-        return jnp.asarray(self.matrix, x.dtype)
-
-    def spec(self):
-        return {"kind": "constant", "matrix": [list(r) for r in self.matrix]}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(spec["matrix"])

@@ -6,8 +6,7 @@ variants (:math:`M\nabla E = 0` by construction) can use the energy gradient.
 
 from __future__ import annotations
 
-import abc
-from typing import Any, Callable, ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -18,24 +17,12 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._mlp import FoldedHead, Hidden, data_statistics, standardise
-from ._registry import network_kwargs, not_serialisable, register
-from .poisson import _check_eps, _default_eps, _projector_vectors
+from ._abstract import AbstractFriction
+from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
+from ._registry import network_kwargs, register
+from ._projection import check_eps, default_eps, projector_vectors
 from .potential import FeatureMap
-from .scaling import Scaling
-
-
-class AbstractFriction(eqx.Module):
-    """A symmetric positive semi-definite matrix field ``M(x)``."""
-
-    #: Whether the matrix depends on the ``grad_energy`` argument (exactly degenerate
-    #: blocks); if not, a matrix computed with another gradient can be reused.
-    uses_gradient: ClassVar[bool] = True
-
-    @abc.abstractmethod
-    def __call__(self, x: State, grad_energy: State) -> Matrix: ...
-
-    def spec(self) -> dict[str, Any]:
-        raise not_serialisable(self)
+from .scaling import Scaling, scaling_spec
 
 
 @register("friction", "mlp")
@@ -116,7 +103,7 @@ class CholeskyFriction(AbstractFriction):
             "width": self.head.weight.shape[1],
             "depth": len(self.hidden.layers),
             "activation": self.hidden.activation,
-            "scaling": None if self.scaling is None else self.scaling.to_json(),
+            "scaling": scaling_spec(self.scaling),
             "features": None if self.features is None else self.features.to_json(),
             "input_stats": None if self.input_stats is None else [list(v) for v in
                                                                    self.input_stats],
@@ -136,33 +123,16 @@ def _feature_kwargs(spec) -> dict[str, Any]:
 
 
 @register("friction", "zero")
-class ZeroFriction(AbstractFriction):
+class ZeroFriction(AbstractZeroMatrix, AbstractFriction):
     """No dissipation: ``M = 0``."""
 
-    n: int = eqx.field(static=True)
-
     uses_gradient: ClassVar[bool] = False
 
-    def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
-        return jnp.zeros((self.n, self.n), x.dtype)
 
-    def spec(self):
-        return {"kind": "zero"}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(n)
-
-
-class KnownFriction(AbstractFriction):
+class KnownFriction(AbstractFunctionMatrix, AbstractFriction):
     """A friction matrix given by a function ``fn(x) -> (n, n)`` (ground-truth systems)."""
 
-    fn: Callable = eqx.field(static=True)
-
     uses_gradient: ClassVar[bool] = False
-
-    def __call__(self, x: State, grad_energy: State | None = None) -> Matrix:
-        return self.fn(x)
 
 
 # -- exactly degenerate variant ----------------------------------------------------------------
@@ -209,7 +179,7 @@ class ProjectedCholeskyFriction(AbstractFriction):
         eps: float | None = None,
         key,
     ):
-        _check_eps(eps)
+        check_eps(eps)
         self.base = CholeskyFriction(
             n, width=width, depth=depth, activation=activation, scaling=scaling,
             features=features, data=data, input_stats=input_stats, key=key,
@@ -224,10 +194,12 @@ class ProjectedCholeskyFriction(AbstractFriction):
     def factor(self, x: State, grad_energy: State) -> Matrix:
         B = self.base.factor(x)
         s = self.base.scaling
-        g_hat, u_hat = _projector_vectors(
-            grad_energy, None if s is None else s.scale, _default_eps(self.eps, x.dtype)
+        g_hat, u_hat = projector_vectors(
+            grad_energy, None if s is None else s.scale, default_eps(self.eps, x.dtype)
         )
         return B - jnp.outer(u_hat, g_hat @ B)
+
+    uses_gradient: ClassVar[bool] = True
 
     def __call__(self, x: State, grad_energy: State) -> Matrix:
         F = self.factor(x, grad_energy)

@@ -22,8 +22,8 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._registry import register
-from .poisson import AbstractPoisson
-from .scaling import Scaling
+from ._abstract import AbstractPoisson
+from .scaling import Scaling, scaling_spec
 
 
 @register("poisson", "lie-poisson")
@@ -62,7 +62,7 @@ class LiePoisson(AbstractPoisson):
 
     def spec(self):
         return {"kind": "lie-poisson",
-                "scaling": None if self.scaling is None else self.scaling.to_json()}
+                "scaling": scaling_spec(self.scaling)}
 
     @classmethod
     def from_spec(cls, spec, n, *, key):

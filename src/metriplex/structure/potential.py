@@ -6,8 +6,7 @@ autodiff in :class:`metriplex.GenericModel`.
 
 from __future__ import annotations
 
-import abc
-from typing import Any, Callable
+from typing import Callable
 
 import equinox as eqx
 import jax
@@ -17,17 +16,8 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Scalar, State
 from ._mlp import Hidden, data_statistics, standardise
-from ._registry import not_serialisable, register
-
-
-class AbstractPotential(eqx.Module):
-    """A scalar function of the state."""
-
-    @abc.abstractmethod
-    def __call__(self, x: State) -> Scalar: ...
-
-    def spec(self) -> dict[str, Any]:
-        raise not_serialisable(self)
+from ._abstract import AbstractPotential
+from ._registry import register
 
 
 class FeatureMap(eqx.Module):

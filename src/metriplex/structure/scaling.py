@@ -82,3 +82,8 @@ class Scaling:
         if obj is None:
             return None
         return cls(tuple(obj["shift"]), tuple(obj["scale"]), float(obj.get("factor", 1.0)))
+
+
+def scaling_spec(scaling: Scaling | None) -> dict | None:
+    """What a block's ``spec()`` records of its scaling (``None`` for none)."""
+    return None if scaling is None else scaling.to_json()

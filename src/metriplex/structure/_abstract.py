@@ -1,0 +1,60 @@
+r"""The abstract bases of the four GENERIC blocks; every concrete block is a final class.
+
+- :class:`AbstractPotential`: a scalar :math:`E(x)` or :math:`S(x)`;
+- :class:`AbstractPoisson`: an antisymmetric :math:`L(x)`, called as ``poisson(x, grad_entropy)``;
+- :class:`AbstractFriction`: a symmetric PSD :math:`M(x)`, called as ``friction(x, grad_energy)``.
+
+The gradient is passed so that exactly degenerate blocks (:math:`L\nabla S = 0` or
+:math:`M\nabla E = 0` by construction) can use it; each final class states in ``uses_gradient``
+whether it does (an abstract class variable, as Equinox's abstract/final rule asks: declared
+here, given once by every concrete class, never overridden).
+
+(No ``from __future__ import annotations`` here: Equinox reads ``AbstractClassVar`` from the
+evaluated annotation.)
+"""
+
+import abc
+from typing import Any
+
+import equinox as eqx
+
+from .._types import Matrix, Scalar, State
+from ._registry import not_serialisable
+
+
+class AbstractPotential(eqx.Module):
+    """A scalar function of the state."""
+
+    @abc.abstractmethod
+    def __call__(self, x: State) -> Scalar: ...
+
+    def spec(self) -> dict[str, Any]:
+        raise not_serialisable(self)
+
+
+class AbstractPoisson(eqx.Module):
+    """An antisymmetric matrix field ``L(x)``."""
+
+    #: Whether the matrix depends on the ``grad_entropy`` argument (exactly degenerate
+    #: blocks); if not, a matrix computed with another gradient can be reused.
+    uses_gradient: eqx.AbstractClassVar[bool]
+
+    @abc.abstractmethod
+    def __call__(self, x: State, grad_entropy: State) -> Matrix: ...
+
+    def spec(self) -> dict[str, Any]:
+        raise not_serialisable(self)
+
+
+class AbstractFriction(eqx.Module):
+    """A symmetric positive semi-definite matrix field ``M(x)``."""
+
+    #: Whether the matrix depends on the ``grad_energy`` argument (exactly degenerate
+    #: blocks); if not, a matrix computed with another gradient can be reused.
+    uses_gradient: eqx.AbstractClassVar[bool]
+
+    @abc.abstractmethod
+    def __call__(self, x: State, grad_energy: State) -> Matrix: ...
+
+    def spec(self) -> dict[str, Any]:
+        raise not_serialisable(self)

@@ -1,0 +1,51 @@
+r"""The projector that makes a learned matrix exactly degenerate: the vectors of
+:math:`Q = I - D^2 g g^\top/(|Dg|^2 + \varepsilon^2)` for a potential's gradient :math:`g`, shared by
+:class:`~metriplex.ProjectedSkewMLPPoisson` (:math:`L\nabla S = 0`) and
+:class:`~metriplex.ProjectedCholeskyFriction` (:math:`M\nabla E = 0`).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import MetriplexError
+from .._types import State
+
+
+def default_eps(eps: float | None, dtype) -> float:
+    """The regulariser of the projectors: machine epsilon of the working dtype by default."""
+    return float(jnp.finfo(dtype).eps) if eps is None else float(eps)
+
+
+def check_eps(eps: float | None) -> None:
+    if eps is not None and not (np.isfinite(eps) and eps > 0.0):
+        raise MetriplexError(
+            f"`eps` (the projector's regulariser) must be finite and > 0, or None for machine "
+            f"epsilon; got {eps}."
+        )
+
+
+def projector_vectors(g: State, scale: tuple[float, ...] | None, eps: float):
+    r"""The two vectors of the projector :math:`Q = I - \hat u\,\hat g^\top` in physical
+    coordinates, for the covector :math:`g` (a gradient):
+
+    .. math:: \hat g = g/\sqrt{s},\quad \hat u = D^2 g/\sqrt{s},\quad
+              s = |Dg|^2 + \varepsilon^2,
+
+    where :math:`Dg` is the gradient in standardised coordinates. :math:`Q^\top g =
+    g\,\varepsilon^2/s`: zero to rounding once :math:`|Dg| \gg \varepsilon`, and :math:`Q \to I`
+    smoothly (no 0/0) where :math:`g \to 0`. Both vectors are bounded (:math:`|D\hat g| < 1`).
+    """
+    if scale is None:
+        h = g
+        d2g = g
+    else:
+        d = jnp.asarray(scale, g.dtype)
+        h = d * g
+        d2g = d * h
+    # eps**2 must not underflow, or s = 0 at g = 0 and g * rsqrt(s) = 0 * inf.
+    e2 = max(eps * eps, float(jnp.finfo(g.dtype).tiny))
+    r = jax.lax.rsqrt(jnp.sum(h * h) + jnp.asarray(e2, g.dtype))
+    return g * r, d2g * r

@@ -1,0 +1,52 @@
+"""The block contract: abstract bases, final concrete blocks that each state uses_gradient."""
+
+import inspect
+from typing import ClassVar
+
+import jax.numpy as jnp
+import pytest
+
+import metriplex.structure as st
+
+
+def _concrete(base):
+    return [c for _, c in inspect.getmembers(st, inspect.isclass)
+            if issubclass(c, base) and not inspect.isabstract(c) and c is not base]
+
+
+@pytest.mark.parametrize("base", [st.AbstractPoisson, st.AbstractFriction])
+def test_every_exported_block_states_whether_it_uses_the_gradient(base):
+    blocks = _concrete(base)
+    assert len(blocks) >= 5
+    for block in blocks:
+        assert isinstance(block.__dict__.get("uses_gradient"), bool), block.__name__
+    exact = {c.__name__ for c in blocks if c.uses_gradient}
+    # The exactly degenerate blocks read the gradient; all others must not claim to.
+    expected = ({"ProjectedSkewMLPPoisson", "EntropyCasimirPoisson3"}
+                if base is st.AbstractPoisson else {"ProjectedCholeskyFriction"})
+    assert exact == expected
+
+
+def test_a_block_that_does_not_state_it_cannot_be_instantiated():
+    class Forgetful(st.AbstractPoisson):
+        def __call__(self, x, grad_entropy):
+            return jnp.zeros((x.shape[0], x.shape[0]), x.dtype)
+
+    with pytest.raises(TypeError, match="uses_gradient"):
+        Forgetful()
+
+    class Stated(st.AbstractPoisson):
+        uses_gradient: ClassVar[bool] = False
+
+        def __call__(self, x, grad_entropy):
+            return jnp.zeros((x.shape[0], x.shape[0]), x.dtype)
+
+    assert Stated()(jnp.zeros(2), jnp.zeros(2)).shape == (2, 2)
+
+
+def test_no_concrete_block_subclasses_another_concrete_block():
+    blocks = _concrete(st.AbstractPoisson) + _concrete(st.AbstractFriction) + _concrete(
+        st.AbstractPotential)
+    for block in blocks:
+        parents = [b for b in block.__mro__[1:] if b in blocks]
+        assert not parents, f"{block.__name__} subclasses {parents[0].__name__}"
