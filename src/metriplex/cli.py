@@ -203,7 +203,8 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
 
 def cmd_train(args) -> None:
     from ._lock import RunLock
-    from .config import check_selection, choose_trajectories, validate
+    from ._selection import check_selection, choose_trajectories
+    from .config import validate
     from .io import read
     from .runs import check_run_folder, evaluate_run, train_run, write_json
 
@@ -301,7 +302,7 @@ def cmd_rollout(args) -> None:
 
 def _chosen_trajectories(args):
     """``--trajectories`` and ``--dt`` of rollout and evaluate, checked before any work."""
-    from .config import parse_ids
+    from ._selection import parse_ids
 
     _positive_finite(args.dt, "--dt")
     return None if args.trajectories is None else parse_ids(args.trajectories, "--trajectories")
