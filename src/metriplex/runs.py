@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -23,12 +24,11 @@ from . import plots
 from ._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._model import with_dtype
+from ._selection import TrajectoryIds, format_ids
 from .config import (
     RunConfig,
-    TrajectoryIds,
     build_loss,
     build_model,
-    format_ids,
     stopping_for,
     units_for,
     validate,
@@ -309,21 +309,30 @@ def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path
     rollout = rollout_data(model, data, scheme=sch, progress=progress)
     report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout)
     if figures is not None:
-        report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout)
+        report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout,
+                       progress=progress)
     return report
 
 
 def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
-                   solver: str | None = None, rollout=None):
+                   solver: str | None = None, rollout=None, progress: bool = False):
     """The report figure set: every trajectory's rollout error over time (failed rollouts
     marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
     over time, and the learned E and S along the rollout (each marks where the rollout failed,
     if it did). Residuals are in the data's rate units (data scale / time scale).
     ``rollout``: what :func:`~metriplex.diagnostics.rollout_data` returned for this model, data
-    and scheme, to reuse."""
+    and scheme, to reuse. ``progress``: a bar over the four figures (large data take a while
+    to draw)."""
+    from tqdm.auto import tqdm
+
     sch = scheme_from_name(scheme, solver=solver)
     out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
+    with tqdm(total=4, disable=not progress, desc="figures", unit="figure", leave=False) as bar:
+        _draw_report(model, data, folder, sch, k, out, xs, lengths, bar)
+
+
+def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
     all_ts = np.asarray(out.ts, dtype=np.float64)
     all_pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
@@ -334,6 +343,7 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
     plots.save_figure(plots.trajectories(ts, pred, obs, names, failed_at=failed_at),
                       folder / "trajectories", t=ts, learned=pred, observed=obs,
                       names=np.array(names), failed_step=failed[k])
+    bar.update()
     # Errors of every trajectory: NaN after a failure (never a number standing for it).
     errors = np.full(all_pred.shape[:2], np.nan)
     for j, Tj in enumerate(lengths):
@@ -346,19 +356,32 @@ def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn
                              ids=list(data.ids)),
         folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
         error_per_variable=per_var, names=np.array(names))
+    bar.update()
     # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
     rate = scale / time_scale(data, scale)
     tk, xk = data.select([data.ids[k]]).t[:T], obs
     dtype = out.xs.dtype
     x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
     dt = jnp.asarray(np.diff(tk), dtype)
-    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
-    res = jax.vmap(sch.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
-    res = np.asarray(res, dtype=np.float64) / rate[None, :]
+    res = np.asarray(_pair_residuals(model, sch, x0, x1, dt), dtype=np.float64) / rate[None, :]
     plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
                       t=tk[1:], residual=res, names=np.array(names))
+    bar.update()
     xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
-    E = np.asarray(jax.vmap(model.energy)(xp), dtype=np.float64)
-    S = np.asarray(jax.vmap(model.entropy)(xp), dtype=np.float64)
+    E, S = (np.asarray(v, dtype=np.float64) for v in _potentials(model, xp))
     plots.save_figure(plots.energy_entropy(ts, E, S, failed_at=failed_at),
                       folder / "energy_entropy", t=ts, energy=E, entropy=S)
+    bar.update()
+
+
+@eqx.filter_jit
+def _pair_residuals(model, scheme, x0, x1, dt):
+    """The scheme's residual of every pair (compiled once: op by op, each operation of the
+    model would compile on its own)."""
+    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
+    return jax.vmap(scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
+
+
+@eqx.filter_jit
+def _potentials(model, xs):
+    return jax.vmap(model.energy)(xs), jax.vmap(model.entropy)(xs)
