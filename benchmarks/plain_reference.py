@@ -167,7 +167,8 @@ from metriplex.data import Trajectories  # noqa: E402
 from metriplex.io import read, write  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
-from metriplex._train import PairRows, PairStore, adjustable_optimizer, make_chunk  # noqa: E402
+from metriplex._pairs import PairRows, PairStore  # noqa: E402
+from metriplex._train import adjustable_optimizer, make_chunk  # noqa: E402
 from metriplex.structure.poisson import CanonicalPoisson, SkewMLPPoisson  # noqa: E402
 from metriplex.structure.potential import MLPPotential, SumOf  # noqa: E402
 from metriplex.structure.friction import CholeskyFriction  # noqa: E402

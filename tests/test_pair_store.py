@@ -7,7 +7,7 @@ import pytest
 
 import metriplex as mx
 from metriplex._errors import MetriplexError
-from metriplex._train import PairRows, PairStore
+from metriplex._pairs import PairRows, PairStore
 from metriplex.config import RunConfig, validate
 from metriplex.data import Pairs, Trajectories, state_scale
 from helpers import damped_oscillator, make_data, oscillator_x0

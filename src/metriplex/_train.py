@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Callable, NamedTuple
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -24,7 +24,6 @@ import optax
 
 from . import _checkpoint
 from ._errors import MetriplexError
-from .data import Pairs, Trajectories
 from .losses import Batch, Loss
 
 
@@ -128,7 +127,7 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static, batc
                shard: Callable[[Batch], Batch] | None = None, noise=None):
     """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
     runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
-    ``full_train`` (a :class:`PairStore` of all training pairs), and returns
+    ``full_train`` (a :class:`~metriplex._pairs.PairStore` of all training pairs), and returns
     ``(params, opt_state, mean loss, mean loss terms)``.
 
     The training pairs are an argument, not a closed-over constant, so the data set is not
@@ -261,102 +260,6 @@ class TrainState:
             since_best=meta["since_best"], cuts=meta["cuts"], train_value=meta["train_value"],
             train_parts=meta["train_parts"], history=History.from_json(meta["history"]),
         )
-
-
-class PairRows(NamedTuple):
-    """Data pairs as rows of one state array (host side): pair ``k`` is
-    ``(x[first[k]], x[second[k]])`` over ``dt[k]``. Consecutive samples of a trajectory share
-    their row, so trajectory data cost their states once, not twice."""
-
-    x: np.ndarray  # (N, n)
-    first: np.ndarray  # (P,) int
-    second: np.ndarray  # (P,) int
-    dt: np.ndarray  # (P,)
-
-    @property
-    def count(self) -> int:
-        return int(self.first.shape[0])
-
-    @classmethod
-    def of(cls, data, n: int | None, what: str) -> "PairRows":
-        """The pairs of ``data`` (:class:`Trajectories`, :class:`Pairs` or ``(x0, x1, dt)``),
-        checked: shapes, ``n`` variables, finite states, finite positive steps."""
-        if isinstance(data, Trajectories):
-            same = data.trajectory[1:] == data.trajectory[:-1]
-            first = np.flatnonzero(same)
-            rows = cls(data.x, first, first + 1, np.diff(data.t)[same])
-        elif isinstance(data, Pairs) or (isinstance(data, tuple) and len(data) == 3):
-            x0, x1, dt = (np.asarray(a) for a in data)
-            if x0.ndim != 2 or x0.shape != x1.shape or dt.shape != x0.shape[:1]:
-                raise MetriplexError(
-                    f"{what} pairs need x0, x1 of shape (N, n) and dt of shape (N,); got "
-                    f"{x0.shape}, {x1.shape}, {dt.shape}."
-                )
-            k = np.arange(len(dt))
-            rows = cls(np.concatenate([x0, x1]), k, k + len(dt), dt)
-        else:
-            raise MetriplexError(
-                f"fit needs Trajectories, Pairs or a tuple (x0, x1, dt); got "
-                f"{type(data).__name__}."
-            )
-        index = np.int32 if len(rows.x) < 2**31 - 1 else np.int64
-        rows = rows._replace(first=rows.first.astype(index), second=rows.second.astype(index))
-        rows.check(n, what)
-        return rows
-
-    def check(self, n: int | None, what: str) -> None:
-        if self.count == 0:
-            raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
-        if n is not None and self.x.shape[1] != n:
-            raise MetriplexError(
-                f"the data have {self.x.shape[1]} state variables but the model expects {n}; "
-                f"build the model for {self.x.shape[1]} variables or select matching columns."
-            )
-        bad = ~np.isfinite(self.dt) | (self.dt <= 0)
-        if np.any(bad):
-            raise MetriplexError(
-                f"every dt must be finite and > 0; {what} data have dt = {self.dt[bad][:3]}. "
-                "Sort samples by time and drop duplicates."
-            )
-        if not np.all(np.isfinite(self.x)):
-            raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
-
-    def batch(self, idx, scale, dtype) -> Batch:
-        """The pairs ``idx`` (a few thousand: evaluation subsets) as a :class:`Batch`."""
-        idx = np.asarray(idx)
-
-        def put(a):
-            return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))
-
-        return Batch(put(self.x[self.first[idx]]), put(self.x[self.second[idx]]),
-                     put(self.dt[idx]), jnp.asarray(scale, dtype))
-
-
-class PairStore(NamedTuple):
-    """All training pairs on device, as :class:`PairRows` hold them (the states once, two
-    index arrays); :meth:`take` gathers a minibatch inside the compiled step."""
-
-    x: jax.Array
-    first: jax.Array
-    second: jax.Array
-    dt: jax.Array
-    scale: jax.Array
-
-    @classmethod
-    def of(cls, rows: PairRows, scale, dtype) -> "PairStore":
-        def put(a):
-            return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
-
-        return cls(put(rows.x), jnp.asarray(rows.first), jnp.asarray(rows.second),
-                   put(rows.dt), jnp.asarray(scale, dtype))
-
-    @property
-    def count(self) -> int:
-        return int(self.first.shape[0])
-
-    def take(self, idx) -> Batch:
-        return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
-                     self.scale)
 
 
 def check_arguments(*, steps, batch_size, eval_every, learning_rate, patience, lbfgs_steps,

@@ -31,14 +31,13 @@ from ._train import (
     is_adjustable,
     learning_rate_of,
     make_chunk,
-    PairRows,
-    PairStore,
     batch_sharding,
     check_arguments,
     make_lbfgs_chunk,
     spread,
     with_learning_rate,
 )
+from ._pairs import PairRows, PairStore
 from ._validate import Plateau, RolloutCheck, rollout_score, scheme_of
 from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
