@@ -22,11 +22,18 @@ def save_figure(fig, stem: str | Path, **raw) -> list[Path]:
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
+    bbox = "tight"
     for ext in ("png", "pdf"):
         p = stem.with_suffix(f".{ext}")
         with atomic_write(p, "wb") as f:
-            fig.savefig(f, format=ext, dpi=150, bbox_inches="tight")
+            fig.savefig(f, format=ext, dpi=150, bbox_inches=bbox)
         paths.append(p)
+        if bbox == "tight":
+            # Laid out and measured once: the second format reuses the layout and the box
+            # (each layout pass measures every tick label; large figures take seconds).
+            bbox = fig.get_tightbbox(fig.canvas.get_renderer()).padded(
+                plt.rcParams["savefig.pad_inches"])
+            fig.set_layout_engine("none")
     if raw:
         import io as _io
 
