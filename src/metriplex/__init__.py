@@ -15,7 +15,7 @@ from ._model import GenericModel as GenericModel
 from ._model import Terms as Terms
 from .data import Pairs as Pairs
 from .data import Trajectories as Trajectories
-from .data import Units as Units
+from ._units import Units as Units
 from .diagnostics import evaluate as evaluate
 from .integrate import RK4 as RK4
 from .integrate import AbstractScheme as AbstractScheme

@@ -28,7 +28,7 @@ class BlackBoxModel(eqx.Module):
     floor of the data.
 
     Its network sees standardised states and its output is in the data's rate units ``rate``
-    (:math:`d_i/\tau`, :attr:`metriplex.data.Units.rate`), so it trains the same on data in any
+    (:math:`d_i/\tau`, :attr:`metriplex.Units.rate`), so it trains the same on data in any
     units of time or state."""
 
     hidden: Hidden

@@ -16,7 +16,8 @@ import numpy as np
 
 from ._errors import MetriplexError
 from ._model import GenericModel
-from .data import Trajectories, Units
+from ._units import Units
+from .data import Trajectories
 from .integrate import scheme_from_name
 from .losses import (
     DEGENERACY_POINTS,
@@ -381,7 +382,7 @@ def _known_entropy(config: RunConfig, n: int):
 
 
 def units_for(config: RunConfig, data: Trajectories) -> Units:
-    """The data's :class:`~metriplex.data.Units` for the blocks that ``config`` gives."""
+    """The data's :class:`~metriplex.Units` for the blocks that ``config`` gives."""
     n = data.n
     return Units.from_data(data, poisson=_known_poisson(config, n),
                            entropy=_known_entropy(config, n),

@@ -23,7 +23,7 @@ their **relative residual**
    \bar f)|^2}{\operatorname{mean}_\text{pairs}|D_\tau^{-1}\Delta x/\Delta t|^2}},
 
 the fraction of the observed rates that the model leaves unexplained, in the data's own rate
-units :math:`D_\tau = \operatorname{diag}(d_i/\tau)` (:class:`metriplex.data.Units`): it does not
+units :math:`D_\tau = \operatorname{diag}(d_i/\tau)` (:class:`metriplex.Units`): it does not
 depend on the units of time or of any state variable, and neither does the black box, whose
 networks work in those units too. The **residual ratio** is
 :math:`r_\text{GENERIC}/\max(r_\text{black box},\ \text{tolerance})`.

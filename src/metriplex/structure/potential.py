@@ -81,7 +81,7 @@ class MLPPotential(AbstractPotential):
     given, so that states of very different magnitudes (e.g. temperatures ~300 and entropies
     ~1e-2) are learned equally well. ``output_scale`` :math:`\sigma` multiplies the network:
     :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
-    (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.data.Units`).
+    (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
 
     ```python
     E = MLPPotential(10, width=64, depth=2, key=jr.key(0))

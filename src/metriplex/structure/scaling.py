@@ -11,7 +11,7 @@ both coordinates. A positive ``factor`` :math:`f` carries the units of time and 
 potential that the bivector pairs with: :math:`L = f\,D\tilde L D^\top`. With
 :math:`f = 1/(\tau\sigma)` (:math:`\tau` the data's time scale, :math:`\sigma` the scale of
 :math:`E` for :math:`L`, of :math:`S` for :math:`M`) a network of order one gives rates of the
-data's order, whatever the units of time (see :class:`metriplex.data.Units`). Antisymmetry, symmetry, positive semi-definiteness, degeneracy and the Jacobi
+data's order, whatever the units of time (see :class:`metriplex.Units`). Antisymmetry, symmetry, positive semi-definiteness, degeneracy and the Jacobi
 identity are all invariant under this congruence. This module is the one place where the rule
 lives; the networks fold it into their last layer.
 """

@@ -1,0 +1,125 @@
+r"""The data's natural units (:class:`Units`): per-variable shift and scale, the time scale and
+the scales of the two potentials, in which every network and every loss term works.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .data import Trajectories, time_scale
+
+
+@dataclasses.dataclass(frozen=True)
+class Units:
+    r"""The data's natural units, in which every network and every loss term works.
+
+    - ``shift``, ``scale``: per-variable mean :math:`c_i` and standard deviation :math:`d_i`;
+    - ``time``: the time scale :math:`\tau` (:func:`time_scale`);
+    - ``energy``, ``entropy``: scales :math:`\sigma_E, \sigma_S` of the two potentials.
+
+    In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
+    :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
+    :math:`L = D\tilde L D^\top/(\tau\sigma_E)`, :math:`M = D\tilde M D^\top/(\tau\sigma_S)`,
+    so that :math:`\dot{\tilde x} = \tilde L\tilde\nabla\tilde E + \tilde M\tilde\nabla
+    \tilde S` and the networks :math:`\tilde E, \tilde S, \tilde L, \tilde M` of order one give
+    rates of the data's order. The loss terms are measured in the same units (a residual in
+    units of :math:`d_i/\tau`), so their weights need no tuning to the data's units.
+    """
+
+    shift: tuple[float, ...]
+    scale: tuple[float, ...]
+    time: float = 1.0
+    energy: float = 1.0
+    entropy: float = 1.0
+
+    @classmethod
+    def from_data(cls, data: "Trajectories", *, poisson=None, entropy=None,
+                  friction=None) -> "Units":
+        r"""The units of ``data``, with the potentials' scales chosen from the blocks that are
+        **given** (pass the known ``poisson``, ``entropy`` or ``friction`` block; leave out
+        those that are learned):
+
+        - a learned energy that pairs with a given :math:`L` must supply the rates by itself:
+          :math:`\sigma_E = 1/(\tau\,\operatorname{rms}(D^{-1}LD^{-\top}))`;
+        - a given entropy sets :math:`\sigma_S = \operatorname{rms}(D\nabla S)` (for
+          :math:`S = s_1 + s_2`, the scale of the :math:`s_i`); a given :math:`M` with a learned
+          entropy sets :math:`\sigma_S = 1/(\tau\,\operatorname{rms}(D^{-1}MD^{-\top}))`;
+        - where both partners are learned the scale is 1 (their common factor is not
+          identifiable, so any choice is as good).
+
+        ```python
+        L, S = CanonicalPoisson(3, pairs=1), SumOf((2,))
+        units = Units.from_data(data, poisson=L, entropy=S)
+        energy = MLPPotential(3, data=data.x, output_scale=units.energy, key=key)
+        ```
+        """
+        from .structure._mlp import data_statistics
+
+        shift, scale = data_statistics(data.x)
+        d = np.asarray(scale)
+        tau = time_scale(data, d)
+        x = data.x[np.linspace(0, len(data.x) - 1, min(256, len(data.x))).astype(int)]
+        energy = entropy_scale = 1.0
+        if poisson is not None:
+            size = _bivector_size(poisson, x, d)
+            if size is not None:
+                energy = 1.0 / (tau * size)
+        if entropy is not None:
+            entropy_scale = _gradient_size(entropy, x, d) or 1.0
+        elif friction is not None:
+            size = _bivector_size(friction, x, d)
+            if size is not None:
+                entropy_scale = 1.0 / (tau * size)
+        return cls(shift, scale, tau, float(energy), float(entropy_scale))
+
+    @property
+    def rate(self) -> np.ndarray:
+        r"""Per-variable rate scale :math:`d_i/\tau`: the unit of every residual."""
+        return np.asarray(self.scale) / self.time
+
+    def poisson_scaling(self):
+        r"""The :class:`~metriplex.Scaling` of a learned :math:`L`:
+        :math:`L = D\tilde L D^\top/(\tau\sigma_E)`."""
+        from .structure.scaling import Scaling
+
+        return Scaling(self.shift, self.scale, 1.0 / (self.time * self.energy))
+
+    def friction_scaling(self):
+        r"""The :class:`~metriplex.Scaling` of a learned :math:`M`:
+        :math:`M = D\tilde M D^\top/(\tau\sigma_S)`."""
+        from .structure.scaling import Scaling
+
+        return Scaling(self.shift, self.scale, 1.0 / (self.time * self.entropy))
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _rms_nonzero(a: np.ndarray) -> float | None:
+    """Root mean square of the entries that are not zero everywhere (``None`` if all are)."""
+    a = np.asarray(a, dtype=np.float64).reshape(len(a), -1)
+    live = np.any(a != 0, axis=0)
+    if not np.any(live):
+        return None
+    return float(np.sqrt(np.mean(a[:, live] ** 2)))
+
+
+def _bivector_size(block, x: np.ndarray, d: np.ndarray) -> float | None:
+    """RMS of the live entries of :math:`D^{-1}B(x)D^{-\top}` over states ``x``."""
+    import jax
+    import jax.numpy as jnp
+
+    xs = jnp.asarray(x)
+    mats = np.asarray(jax.vmap(block)(xs, jnp.zeros_like(xs)))
+    return _rms_nonzero(mats / np.outer(d, d)[None])
+
+
+def _gradient_size(potential, x: np.ndarray, d: np.ndarray) -> float | None:
+    """RMS of the live entries of :math:`D\nabla S(x)` over states ``x``."""
+    import jax
+    import jax.numpy as jnp
+
+    grads = np.asarray(jax.vmap(jax.grad(potential))(jnp.asarray(x)))
+    return _rms_nonzero(grads * d[None])
