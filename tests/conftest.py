@@ -1,5 +1,7 @@
 """Tests run in float64 with JAX's strict rank and dtype promotion; warnings are errors."""
 
+import contextlib
+import io
 import os
 import time
 
@@ -14,6 +16,8 @@ jax.config.update("jax_numpy_dtype_promotion", "strict")
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+
+import pytest  # noqa: E402
 
 #: Entries of the compilation cache older than this are deleted at the start of a run.
 COMPILATION_CACHE_DAYS = 3
@@ -46,3 +50,45 @@ def pytest_configure(config):
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     os.environ["JAX_COMPILATION_CACHE_DIR"] = str(folder)
     os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+
+
+# -- one training run that the command-line tests share ----------------------------------------
+
+#: The options of the shared run (``trained_run``): 20 steps on 6 of the 8 trajectories, 4 and 5
+#: validating.
+TRAINED_RUN_OPTIONS = ("--entropy", "sum:2", "--poisson", "canonical:1", "--width", "8",
+                       "--steps", "20", "--trajectories", "0-5", "--validation-ids", "4,5",
+                       "--quiet")
+
+
+@pytest.fixture(scope="session")
+def trained_run(tmp_path_factory):
+    """A folder with ``data.npz`` (``helpers.oscillator_data()``: 8 trajectories of 21 states,
+    ids 0-7) and ``run/``, what ``metriplex train data.npz --out run`` with
+    TRAINED_RUN_OPTIONS wrote. Tests only read it (they write their outputs elsewhere).
+
+    A training costs a minute of compiling and figures on a busy CPU, so the command-line tests
+    that need a run folder share this one; they all go to one xdist worker (see
+    ``pytest_collection_modifyitems``), which trains it once.
+    """
+    from helpers import oscillator_data
+    from metriplex.cli import main
+    from metriplex.io import write
+
+    folder = tmp_path_factory.mktemp("trained")
+    write(folder / "data.npz", oscillator_data())
+    err = io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+        code = main(["train", str(folder / "data.npz"), "--out", str(folder / "run"),
+                     *TRAINED_RUN_OPTIONS])
+    assert code == 0, err.getvalue()
+    return folder
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config, items):
+    """Tests that share the session's training run go to one xdist worker (``--dist
+    loadgroup``, pyproject.toml), which then trains it once, not once per worker."""
+    for item in items:
+        if "trained_run" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.xdist_group("trained_run"))

@@ -1,5 +1,7 @@
 """Small known systems for tests (the full reference systems live in metriplex.systems)."""
 
+import functools
+
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -13,6 +15,9 @@ def lie_poisson(m):
     return jnp.array([[0.0, -m[2], m[1]], [m[2], 0.0, -m[0]], [-m[1], m[0], 0.0]])
 
 
+# Each system is built once per process: its functions are static parts of every compiled call
+# on it, so a model rebuilt for every test would have every test compile its rollouts anew.
+@functools.cache
 def rigid_body() -> mx.GenericModel:
     return mx.GenericModel(
         mx.Known(lambda m: 0.5 * jnp.sum(m**2 / INERTIA)),
@@ -22,6 +27,7 @@ def rigid_body() -> mx.GenericModel:
     )
 
 
+@functools.cache
 def damped_oscillator(kappa: float = 0.3) -> mx.GenericModel:
     """(q, p, s): E = (q^2 + p^2)/2 + s, S = s, friction moves kinetic energy into s.
 
@@ -41,10 +47,26 @@ def damped_oscillator(kappa: float = 0.3) -> mx.GenericModel:
     )
 
 
+#: make_data simulates at least this many trajectories of this many steps and keeps the ones
+#: asked for, so that the tests' data sets of a system share one compiled rollout.
+SIMULATED_TRAJECTORIES, SIMULATED_STEPS = 32, 60
+
+
 def make_data(model, x0, dt, steps, names=()):
-    ts = jnp.arange(steps + 1.0) * dt
-    xs = mx.simulate(model, jnp.asarray(x0), ts)
-    return mx.Trajectories.from_arrays(np.asarray(ts), np.asarray(xs), names)
+    """``len(x0)`` trajectories of ``model`` from ``x0``, ``steps`` Crank–Nicolson steps of
+    ``dt`` each.
+
+    The rollout covers SIMULATED_STEPS steps (or more) and pads the batch with copies of the
+    first state up to SIMULATED_TRAJECTORIES: a time step depends only on the ones before it,
+    and a copy changes no decision the batched solver takes for the batch as a whole.
+    """
+    x0 = np.asarray(x0)
+    k = len(x0)
+    total = max(steps, SIMULATED_STEPS)
+    padded = np.concatenate([x0, np.repeat(x0[:1], max(SIMULATED_TRAJECTORIES - k, 0), 0)])
+    ts = jnp.arange(total + 1.0) * dt
+    xs = np.asarray(mx.simulate(model, jnp.asarray(padded), ts))[:k, : steps + 1]
+    return mx.Trajectories.from_arrays(np.asarray(ts)[: steps + 1], xs, names)
 
 
 def rigid_x0(k, seed=0):
@@ -53,3 +75,11 @@ def rigid_x0(k, seed=0):
 
 def oscillator_x0(k, seed=0):
     return np.asarray(jr.uniform(jr.key(seed), (k, 3), minval=-1.0, maxval=1.0))
+
+
+def oscillator_data(k=8, n_t=21, names=("q", "p", "s")) -> mx.Trajectories:
+    """``k`` smooth trajectories of ``n_t`` states (q, p, s), made with NumPy alone (no JAX
+    compilation)."""
+    t = np.arange(n_t) * 0.1
+    return mx.Trajectories.from_list(
+        [(t, np.c_[np.cos(t + j), -np.sin(t + j), 0.01 * t + 0.1 * j]) for j in range(k)], names)

@@ -15,7 +15,6 @@ import pytest
 
 import metriplex as mx
 from metriplex.cli import main
-from helpers import damped_oscillator, make_data, oscillator_x0, rigid_body, rigid_x0
 
 
 def run(*args):
@@ -49,15 +48,10 @@ def assert_clean_error(res, pattern):
     assert re.search(pattern, res.stderr), res.stderr
 
 
-@pytest.fixture(scope="module")
-def oscillator_run(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("cli")
-    data = make_data(damped_oscillator(), oscillator_x0(10), 0.1, 40, names=("q", "p", "s"))
-    mx.write(tmp / "data.npz", data)
-    res = run("train", tmp / "data.npz", "--out", tmp / "run", "--entropy", "sum:2", "--poisson",
-              "canonical:1", "--friction", "neural", "--steps", "300", "--width", "16", "--quiet")
-    assert res.returncode == 0, res.stderr
-    return tmp
+@pytest.fixture
+def oscillator_run(trained_run):
+    """The session's shared training run (tests/conftest.py): ``data.npz`` and ``run/``."""
+    return trained_run
 
 
 def test_run_folder_contents(oscillator_run):
@@ -79,34 +73,39 @@ def test_run_folder_contents(oscillator_run):
     assert set(cfg["train_trajectories"]).isdisjoint(cfg["validation_trajectories"])
 
 
-def test_rollout_and_evaluate(oscillator_run):
-    tmp = oscillator_run
-    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred.npz")
+def test_rollout_and_evaluate(oscillator_run, tmp_path):
+    src, tmp = oscillator_run, tmp_path  # the run and data; the outputs
+    shared = digest(src)
+    res = run("rollout", src / "run", src / "data.npz", "--out", tmp / "pred.npz")
     assert res.returncode == 0, res.stderr
-    pred, data = mx.read(tmp / "pred.npz"), mx.read(tmp / "data.npz")
+    pred, data = mx.read(tmp / "pred.npz"), mx.read(src / "data.npz")
     assert pred.names == data.names and len(pred) == len(data)
     np.testing.assert_array_equal(pred.t, data.t)
     np.testing.assert_allclose(pred.x[pred.t == 0], data.x[data.t == 0], rtol=1e-6)
     # Newton instead of the default fixed-point-first solver: the same rollout to tolerance.
-    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred_newton.npz",
+    res = run("rollout", src / "run", src / "data.npz", "--out", tmp / "pred_newton.npz",
               "--solver", "newton")
     assert res.returncode == 0, res.stderr
     np.testing.assert_allclose(mx.read(tmp / "pred_newton.npz").x, pred.x, rtol=1e-4, atol=1e-5)
-    res = run("rollout", tmp / "run", tmp / "data.npz", "--out", tmp / "pred_rk4.npz",
+    res = run("rollout", src / "run", src / "data.npz", "--out", tmp / "pred_rk4.npz",
               "--scheme", "rk4", "--solver", "newton")
     assert_clean_error(res, r"--solver applies to the implicit schemes")
-    res = run("evaluate", tmp / "run", tmp / "data.npz", "--out", tmp / "metrics.json")
+    # A short reference training for the verdict: the keys written are checked here, the
+    # verdict itself in test_verdict.py.
+    res = run("evaluate", src / "run", src / "data.npz", "--out", tmp / "metrics.json",
+              "--verdict-steps", "100")
     assert res.returncode == 0, res.stderr
     m = json.loads((tmp / "metrics.json").read_text())
     for key in ("rollout_error", "rollout_error_mean", "energy_relative_drift", "entropy_min_step",
-                "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual"):
+                "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual", "verdict"):
         assert key in m, key
     assert len(m["rollout_error"]) == len(data)
     # The output exists now: evaluate refuses to overwrite it.
     before = digest(tmp)
-    res = run("evaluate", tmp / "run", tmp / "data.npz", "--out", tmp / "metrics.json")
+    res = run("evaluate", src / "run", src / "data.npz", "--out", tmp / "metrics.json")
     assert_clean_error(res, r"exists; refusing to overwrite it\. Pass --overwrite")
     assert digest(tmp) == before
+    assert digest(src) == shared  # the run folder and the data are only read
 
 
 def test_train_refuses_to_overwrite_a_run(oscillator_run):
@@ -170,7 +169,7 @@ def test_model_file_errors(oscillator_run, tmp_path):
     assert_clean_error(run("evaluate", tmp_path / "old", tmp / "data.npz"),
                        r"format version 99; this metriplex reads version 1")
     assert_clean_error(run("evaluate", tmp_path / "nothing", tmp / "data.npz"), r"does not exist")
-    wide = make_data(rigid_body(), rigid_x0(2), 0.1, 5)
+    wide = mx.read(tmp / "data.npz")
     wide = mx.Trajectories(wide.trajectory, wide.t, np.c_[wide.x, wide.x])
     mx.write(tmp_path / "wide.npz", wide)
     assert_clean_error(run("evaluate", tmp / "run", tmp_path / "wide.npz"),

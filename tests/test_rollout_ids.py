@@ -8,7 +8,6 @@ import numpy as np
 
 import metriplex as mx
 from metriplex.cli import main
-from helpers import damped_oscillator, make_data, oscillator_x0
 
 
 def _run(*args) -> int:
@@ -16,18 +15,17 @@ def _run(*args) -> int:
         return main([str(a) for a in args])
 
 
-def test_predictions_keep_the_data_ids_and_a_status_per_trajectory(tmp_path):
-    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
-    mx.write(tmp_path / "data.npz", data)
-    assert _run("train", tmp_path / "data.npz", "--out", tmp_path / "run", "--entropy", "sum:2",
-                "--poisson", "canonical:1", "--steps", "20", "--width", "8", "--quiet") == 0
+def test_predictions_keep_the_data_ids_and_a_status_per_trajectory(trained_run, tmp_path):
+    # The session's shared run (tests/conftest.py), rolled out on its data under other ids.
+    data = mx.read(trained_run / "data.npz")
+    run_dir = trained_run / "run"
     # Ids that are not 0..K-1, in the order the file holds them.
-    remap = {int(i): j for i, j in zip(data.ids, (7, 0, 5, 12, 3, 9))}
+    remap = {int(i): j for i, j in zip(data.ids, (7, 0, 5, 12, 3, 9, 21, 14))}
+    assert len(remap) == len(data.ids)
     test = mx.Trajectories(np.array([remap[int(i)] for i in data.trajectory]), data.t, data.x,
                            data.names)
     mx.write(tmp_path / "test.csv", test)
-    assert _run("rollout", tmp_path / "run", tmp_path / "test.csv", "--out",
-                tmp_path / "pred.csv") == 0
+    assert _run("rollout", run_dir, tmp_path / "test.csv", "--out", tmp_path / "pred.csv") == 0
     pred = mx.read(tmp_path / "pred.csv")
     assert sorted(pred.ids) == sorted(test.ids)
     for tid in test.ids:  # matched by id: same first state, same time grid
@@ -38,5 +36,4 @@ def test_predictions_keep_the_data_ids_and_a_status_per_trajectory(tmp_path):
     assert {e["trajectory"] for e in status["trajectories"]} == set(int(i) for i in test.ids)
     assert all(e["status"] == "ok" and e["states"] == e["samples"] for e in status["trajectories"])
     # The status file is an output like the predictions: never overwritten without --overwrite.
-    assert _run("rollout", tmp_path / "run", tmp_path / "test.csv", "--out",
-                tmp_path / "pred.csv") == 2
+    assert _run("rollout", run_dir, tmp_path / "test.csv", "--out", tmp_path / "pred.csv") == 2

@@ -3,7 +3,9 @@ and `--split` for `train`, `--trajectories` for `rollout` and `evaluate`; the id
 recorded in the run folder, and `--resume` refuses other data or another split.
 
 Every refusal is one message (the rule, the value, the fix), exit status 2, no traceback, and
-nothing written. One short training (20 steps) is shared by the tests that need a run.
+nothing written. The tests that need a run share the session's short training
+(``trained_run`` in tests/conftest.py: ``--trajectories 0-5 --validation-ids 4,5`` on 8
+trajectories).
 """
 
 import contextlib
@@ -27,6 +29,7 @@ from metriplex.config import (
     parse_ids,
     read_split,
 )
+from helpers import oscillator_data
 
 
 def run(*args):
@@ -45,13 +48,6 @@ def refused(res, pattern):
     lines = [line for line in res.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("metriplex"), res.stderr
     assert re.search(pattern, res.stderr), res.stderr
-
-
-def oscillator_data(k=8, n_t=21) -> mx.Trajectories:
-    t = np.arange(n_t) * 0.1
-    return mx.Trajectories.from_list(
-        [(t, np.c_[np.cos(t + j), -np.sin(t + j), 0.01 * t + 0.1 * j]) for j in range(k)],
-        ("q", "p", "s"))
 
 
 STRUCTURE = ["--entropy", "sum:2", "--poisson", "canonical:1", "--width", "8", "--quiet"]
@@ -193,25 +189,25 @@ def test_rollout_and_evaluate_refuse_a_bad_selection(files, tmp_path, command, o
 
 # -- a run: the ids it used, reusing its split, resuming it ------------------------------------
 
-@pytest.fixture(scope="module")
-def trained(files):
-    run_dir = files / "run"
-    res = run("train", files / "data.npz", "--out", run_dir, "--steps", "20", *STRUCTURE,
-              "--trajectories", "0-5", "--validation-ids", "4,5")
-    assert res.returncode == 0, res.stderr
-    return run_dir
+@pytest.fixture
+def trained(trained_run):
+    """The run folder of the session's shared training (tests/conftest.py), made by
+    ``train DATA --steps 20 [STRUCTURE] --trajectories 0-5 --validation-ids 4,5`` with DATA
+    its ``data.npz`` (``oscillator_data()``, as here)."""
+    return trained_run / "run"
 
 
-def test_the_run_records_the_ids_it_used(files, trained):
+def test_the_run_records_the_ids_it_used(trained):
+    data_file = trained.parent / "data.npz"
     header = json.loads((trained / "config.json").read_text())
     assert header["train_trajectories"] == [0, 1, 2, 3]
     assert header["validation_trajectories"] == [4, 5]
     assert header["validation_by"] == "ids"
-    data = mx.read(files / "data.npz")
+    data = mx.read(data_file)
     assert header["data"]["trajectory_ids"] == list(range(8))  # the file's, not the selection
     assert header["data"]["shape"] == [len(data.t), 3]
     assert header["data"]["sha256"] == data.fingerprint()["sha256"]
-    assert header["data"]["file"] == str(files / "data.npz") and header["data"]["dt"] is None
+    assert header["data"]["file"] == str(data_file) and header["data"]["dt"] is None
     metrics = json.loads((trained / "metrics.json").read_text())
     assert metrics["trajectory_ids"] == [4, 5] and metrics["trajectories"] == 2
 
@@ -233,7 +229,8 @@ def test_a_split_is_reused_exactly_from_a_run_folder_or_a_file(files, trained, t
     assert choose_trajectories(data.ids, "data", check_selection()) == (None, None)
 
 
-def test_resume_refuses_other_data_or_another_split(files, trained, tmp_path):
+def test_resume_refuses_other_data_or_another_split(trained, tmp_path):
+    data_file = trained.parent / "data.npz"
     same = ["--steps", "20", *STRUCTURE, "--resume"]
     before = json.loads((trained / "config.json").read_text())
     other = oscillator_data()
@@ -246,27 +243,27 @@ def test_resume_refuses_other_data_or_another_split(files, trained, tmp_path):
             rf"'.*data\.npz' \(8 trajectories, ids 0-7; 168 rows x 3 variables; sha256 {sha}\); "
             r"this command gives '.*other\.npz' \(8 trajectories, ids 0-7; 168 rows x 3 "
             r"variables; sha256 (?!" + sha + r")[0-9a-f]{12}\)\. Resume with the same data file")
-    refused(run("train", files / "data.npz", "--out", trained, *same, "--trajectories", "0-5",
+    refused(run("train", data_file, "--out", trained, *same, "--trajectories", "0-5",
                 "--validation-ids", "4,5", "--dt", "0.2"),
             r"--resume needs the data .* this command gives '.*data\.npz' with --dt 0\.2 ")
-    refused(run("train", files / "data.npz", "--out", trained, *same, "--trajectories", "0-5",
+    refused(run("train", data_file, "--out", trained, *same, "--trajectories", "0-5",
                 "--validation-ids", "3,5"),
             r"--resume needs the trajectories of the interrupted run, but they differ: it "
             r"trained on 0-3 and validated on 4-5; this command trains on 0-2,4 and validates "
             r"on 3,5\. .*--split RUN_DIR")
-    refused(run("train", files / "data.npz", "--out", trained, *same),
+    refused(run("train", data_file, "--out", trained, *same),
             r"it trained on 0-3 and validated on 4-5; this command trains on")
     assert json.loads((trained / "config.json").read_text()) == before  # untouched
 
 
-def test_rollout_and_evaluate_on_chosen_trajectories(files, trained, tmp_path):
-    res = run("rollout", trained, files / "data.npz", "--out", tmp_path / "p.npz",
+def test_rollout_and_evaluate_on_chosen_trajectories(trained, tmp_path):
+    res = run("rollout", trained, trained.parent / "data.npz", "--out", tmp_path / "p.npz",
               "--trajectories", "1,6-7")
     assert res.returncode == 0, res.stderr
     assert list(mx.read(tmp_path / "p.npz").ids) == [1, 6, 7]
     status = json.loads((tmp_path / "p.npz.status.json").read_text())
     assert [e["trajectory"] for e in status["trajectories"]] == [1, 6, 7]
-    res = run("evaluate", trained, files / "data.npz", "--out", tmp_path / "m.json",
+    res = run("evaluate", trained, trained.parent / "data.npz", "--out", tmp_path / "m.json",
               "--trajectories", "6-7", "--no-verdict")
     assert res.returncode == 0, res.stderr
     metrics = json.loads((tmp_path / "m.json").read_text())
