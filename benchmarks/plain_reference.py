@@ -162,7 +162,7 @@ import numpy as np  # noqa: E402
 import optax  # noqa: E402
 
 from metriplex.cli import _config_from_args, build_parser  # noqa: E402
-from metriplex.config import build_loss, build_model, units_for  # noqa: E402
+from metriplex._build import build_loss, build_model, units_for  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
 from metriplex.io import read, write  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402

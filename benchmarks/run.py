@@ -10,7 +10,7 @@ What is measured, and how:
 - **training step**: the compiled chunk of :func:`metriplex.fit` itself
   (``metriplex._train.make_chunk``: random minibatch, ``value_and_grad`` of the loss, Adam
   update, ``length`` steps per ``lax.scan``), on a model and loss made by
-  ``config.build_model`` / ``config.build_loss`` from data of ``metriplex.systems.generate``.
+  ``_build.build_model`` / ``_build.build_loss`` from data of ``metriplex.systems.generate``.
   Times are medians over repeats after compilation. ``cpu ms`` is process CPU time per step
   (with one compute thread this is the step's cost, and other processes on a shared machine
   disturb it far less than ``wall ms``); targets are judged on it.
@@ -68,7 +68,8 @@ import numpy as np  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # float64 rows; float32 rows cast explicitly
 
 import metriplex as mx  # noqa: E402
-from metriplex.config import RunConfig, build_loss, build_model, preset  # noqa: E402
+from metriplex._build import build_loss, build_model  # noqa: E402
+from metriplex.config import RunConfig, preset  # noqa: E402
 from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402

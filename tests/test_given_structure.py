@@ -7,7 +7,8 @@ import pytest
 import scipy.io
 
 import metriplex as mx
-from metriplex.config import RunConfig, build_model, validate
+from metriplex._build import build_model
+from metriplex.config import RunConfig, validate
 from helpers import damped_oscillator, make_data, oscillator_x0
 
 CANONICAL = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])

@@ -4,7 +4,8 @@ import jax.numpy as jnp
 import pytest
 
 from metriplex._errors import MetriplexError
-from metriplex.config import SCHEDULES, RunConfig, stopping_for, validate
+from metriplex._build import stopping_for
+from metriplex.config import SCHEDULES, RunConfig, validate
 from metriplex.runs import train_run
 from metriplex.train import Plateau
 from helpers import damped_oscillator, make_data, oscillator_x0

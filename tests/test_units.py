@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import metriplex as mx
-from metriplex.config import RunConfig, build_loss, build_model, units_for
+from metriplex._build import build_loss, build_model, units_for
+from metriplex.config import RunConfig
 from metriplex.data import time_scale
 from helpers import damped_oscillator, make_data, oscillator_x0
 

@@ -1,8 +1,8 @@
 """Run configuration: what is learned and what is given, as plain JSON-able settings.
 
 The command line and the experiment presets describe a run with a :class:`RunConfig`;
-:func:`build_model` and :func:`build_loss` turn it into the objects the library works with
-(``GenericModel``, ``Loss``). Library code itself takes objects, never these strings.
+:func:`~metriplex._build.build_model` and :func:`~metriplex._build.build_loss` turn it into
+the objects the library works with (``GenericModel``, ``Loss``). Library code itself takes objects, never these strings.
 """
 
 from __future__ import annotations
@@ -11,29 +11,17 @@ import dataclasses
 import math
 from typing import Any
 
-import jax.random as jr
 import numpy as np
 
 from ._errors import MetriplexError
-from ._model import GenericModel
-from ._units import Units
-from .data import Trajectories
 from .integrate import scheme_from_name
-from .losses import (
-    DEGENERACY_POINTS,
-    FrictionDegeneracy,
-    JacobiPenalty,
-    Loss,
-    PoissonDegeneracy,
-    SchemeResidual,
-)
-from .structure import _registry
+from .io import read_matrix
+from .losses import DEGENERACY_POINTS
 from .structure.constant import ConstantFriction, ConstantPoisson
-from .structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
-from .structure.lie_poisson import LiePoisson
+from .structure.friction import ZeroFriction
 from .structure.poisson import CanonicalPoisson, ZeroPoisson
-from .structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
-from .train import Plateau
+from .structure.potential import FeatureMap, SumOf, ZeroPotential
+
 # The command line's trajectory selection, importable from here as before.
 from ._selection import (  # noqa: F401
     IDS_SYNTAX,
@@ -301,57 +289,6 @@ FRICTION_CHOICES = ("neural", "zero", "file")
 LEARNED_POISSON = ("neural", "casimir3", "lie-poisson")
 
 
-def read_matrix(path: str, key: str, n: int) -> np.ndarray:
-    """A constant ``n x n`` operator from ``.npy`` (the array), ``.npz`` or ``.mat`` (the
-    variable ``key``, i.e. ``L`` or ``M``, as published GENERIC datasets store them)."""
-    from pathlib import Path
-
-    p = Path(path)
-    option = "--poisson" if key == "L" else "--friction"
-    if not p.is_file():
-        raise MetriplexError(
-            f"{option} file:PATH needs an existing file; {str(p)!r} does not exist. Give the "
-            f"path of a .npy, .npz or .mat file holding the {n}x{n} matrix {key}."
-        )
-    try:
-        if p.suffix == ".npy":
-            a = np.load(p, allow_pickle=False)
-        elif p.suffix == ".npz":
-            with np.load(p, allow_pickle=False) as z:
-                names = list(z.files)
-                if key not in names and len(names) != 1:
-                    raise MetriplexError(
-                        f"{str(p)!r} holds the arrays {names}; name the matrix {key!r} or store "
-                        "it alone."
-                    )
-                a = z[key] if key in names else z[names[0]]
-        elif p.suffix == ".mat":
-            import scipy.io
-
-            scope = scipy.io.loadmat(p)
-            if key not in scope:
-                found = sorted(k for k in scope if not k.startswith("__"))
-                raise MetriplexError(
-                    f"{str(p)!r} has no variable {key!r} (found {found}); store the matrix as "
-                    f"{key}."
-                )
-            a = scope[key]
-        else:
-            raise MetriplexError(
-                f"{option} file:PATH reads .npy, .npz or .mat files; got {p.suffix or 'no'} "
-                "suffix. Save the matrix with numpy.save."
-            )
-    except (OSError, ValueError, NotImplementedError) as err:
-        raise MetriplexError(f"cannot read the matrix {key} from {str(p)!r}: {err}.") from None
-    a = np.asarray(a, dtype=np.float64)
-    if a.shape != (n, n):
-        raise MetriplexError(
-            f"the matrix {key} in {str(p)!r} has shape {a.shape}; the data have {n} variables, "
-            f"so it must be {n}x{n}."
-        )
-    return a
-
-
 def _known_poisson(config: RunConfig, n: int):
     """The given Poisson bivector, or ``None`` when it is learned."""
     if config.poisson in LEARNED_POISSON:
@@ -381,58 +318,6 @@ def _known_entropy(config: RunConfig, n: int):
     return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
 
 
-def units_for(config: RunConfig, data: Trajectories) -> Units:
-    """The data's :class:`~metriplex.Units` for the blocks that ``config`` gives."""
-    n = data.n
-    return Units.from_data(data, poisson=_known_poisson(config, n),
-                           entropy=_known_entropy(config, n),
-                           friction=_known_friction(config, n))
-
-
-def build_model(config: RunConfig, data: Trajectories, *, key,
-                units: Units | None = None) -> GenericModel:
-    """The untrained model that ``config`` describes, in the natural ``units`` of ``data``
-    (default :func:`units_for`): networks see standardised states, and their outputs are scaled
-    so that an untrained network gives rates of the data's order, whatever the units."""
-    n = data.n
-    validate(config, n)
-    units = units_for(config, data) if units is None else units
-    x = data.x
-    kE, kS, kL, kM = jr.split(key, 4)
-    net = dict(width=config.width, depth=config.depth, activation=config.activation)
-    features = FEATURES.get(config.features)
-    blocks = _feature_blocks(config)
-    feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
-    energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
-                          quadratic=bool(config.quadratic), key=kE, **net)
-    entropy = _known_entropy(config, n)
-    if entropy is None:
-        entropy = MLPPotential(n, features=feats["entropy"], data=x,
-                               output_scale=units.entropy, quadratic=bool(config.quadratic),
-                               key=kS, **net)
-    poisson_scaling = units.poisson_scaling()
-    friction_scaling = units.friction_scaling()
-    exact_L, exact_M = exact_blocks(config)
-    poisson = _known_poisson(config, n)
-    if config.poisson == "neural":
-        spec = {"kind": "projected-mlp" if exact_L else "mlp", **net,
-                "scaling": poisson_scaling.to_json()}
-        poisson = _registry.from_spec("poisson", spec, n, key=kL)
-    elif config.poisson == "casimir3":
-        spec = {"kind": "casimir3", **net, "scaling": poisson_scaling.to_json()}
-        poisson = _registry.from_spec("poisson", spec, n, key=kL)
-    elif config.poisson == "lie-poisson":
-        poisson = LiePoisson(n, scaling=poisson_scaling, key=kL)
-    if config.friction == "neural":
-        cls = ProjectedCholeskyFriction if exact_M else CholeskyFriction
-        friction = cls(n, **net, scaling=friction_scaling, features=feats["friction"], data=x,
-                       key=kM)
-    else:
-        friction = _known_friction(config, n)
-    return GenericModel(energy, entropy, poisson, friction)
-
-
-#: Learning-rate schedules by name: what ``--schedule`` means.
 SCHEDULES = {
     "plateau": "cut the rate when the validation loss stops improving, stop after --lr-cuts "
                "cuts; --steps is a cap (default)",
@@ -440,47 +325,6 @@ SCHEDULES = {
 }
 
 
-def stopping_for(config: RunConfig) -> Plateau | None:
-    """The ``stopping`` argument of :func:`~metriplex.fit` that ``config.schedule`` names
-    (``None``: exactly ``config.steps`` steps of a cosine schedule, no early stop)."""
-    if config.schedule != "plateau":
-        return None
-    if config.patience is None:
-        return Plateau(cuts=config.lr_cuts)
-    return Plateau(patience=config.patience, cuts=config.lr_cuts)
-
-
-def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
-    r"""Scheme residual plus the penalties that the structure needs (none where exact).
-
-    The trainer measures residuals in units of the data's rates (:attr:`Units.rate`). With
-    ``units``, the penalties are measured in the same dimensionless units as the residual
-    (:math:`L\nabla S` scaled by :math:`\sigma_E/\sigma_S`, :math:`M\nabla E` by
-    :math:`\sigma_S/\sigma_E`, the Jacobi tensor by :math:`\sigma_E^2/\tau`), so a weight
-    means the same on any data.
-    """
-    e, s, tau = (1.0, 1.0, 1.0) if units is None else (units.energy, units.entropy, units.time)
-    loss = config.w_traj * SchemeResidual(scheme_from_name(config.scheme))
-    exact_L, exact_M = exact_blocks(config)
-    learned_L = config.poisson in LEARNED_POISSON
-    if not exact_L and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
-        loss = loss + config.w_degeneracy_L * (e / s) ** 2 * PoissonDegeneracy(
-            config.degeneracy_at)
-    if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
-        loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
-            config.degeneracy_at)
-    if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
-            and config.w_jacobi > 0:
-        loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(
-            config.jacobi, probes=config.jacobi_probes, samples=config.jacobi_samples
-        )
-    return loss
-
-
-# Adam at 1e-2 (cosine-decayed, see train.default_optimizer) with batches of 256 pairs: a sweep
-# on the pendulum and gas data reached 3-5x lower validation residuals in the same wall time
-# than 2e-3 with batches of 512 (docs/experiments.md). The pendulum presets train and roll out
-# with the discrete-gradient scheme, which conserves the learned energy exactly.
 PRESETS: dict[str, dict[str, Any]] = {
     "rigid-body": dict(
         energy="neural", entropy="zero", poisson="neural", friction="zero", jacobi="exact",

@@ -25,14 +25,8 @@ from ._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from .config import (
-    RunConfig,
-    build_loss,
-    build_model,
-    stopping_for,
-    units_for,
-    validate,
-)
+from ._build import build_loss, build_model, stopping_for, units_for
+from .config import RunConfig, validate
 from .data import Trajectories, state_scale, time_scale
 from .diagnostics import error_over_time, evaluate, rollout_data
 from .integrate import scheme_from_name

@@ -233,7 +233,7 @@ def _met(key, value, target):
 def _untrained_error(config: RunConfig, train, test, scheme, horizon) -> float:
     import jax.random as jr
 
-    from ..config import build_model
+    from .._build import build_model
 
     model = build_model(config, train, key=jr.split(jr.key(config.seed))[0])
     model = with_dtype(model, jnp.float32)

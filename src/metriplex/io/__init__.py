@@ -24,7 +24,9 @@ Where each thing lives; a module imports only from the groups above its own:
    through it: :func:`read`, :func:`write`, :func:`trajectory_suffixes`. A new format is one
    module and one line in ``FORMATS``.
 
-``_model_file`` (:func:`save`, :func:`load`, :func:`read_header`) imports only ``_files``.
+``_model_file`` (:func:`save`, :func:`load`, :func:`read_header`) imports only ``_files``;
+``_operators`` (:func:`read_matrix`: a constant L or M for ``--poisson/--friction file:PATH``)
+imports nothing from io.
 """
 
 from . import _files
@@ -41,11 +43,12 @@ from ._hdf5 import natural_key, read_hdf5, write_hdf5
 from ._mat import read_mat, read_mat_operators, write_mat
 from ._model_file import FORMAT_VERSION, MAGIC, MODEL_DTYPES, load, read_header, save
 from ._npz import read_npz
+from ._operators import read_matrix
 from ._registry import read, trajectory_suffixes, write
 
 __all__ = ["FORMAT_VERSION", "MAGIC", "MODEL_DTYPES", "atomic_write", "check_output_file",
            "check_output_folder", "load", "natural_key", "read", "read_csv", "read_hdf5",
-           "read_header", "read_mat", "read_mat_operators", "read_npz", "save",
+           "read_header", "read_mat", "read_mat_operators", "read_matrix", "read_npz", "save",
            "trajectory_suffixes", "write", "write_hdf5", "write_json", "write_mat",
            "_json_default", "_strict"]
 
