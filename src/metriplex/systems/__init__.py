@@ -23,7 +23,7 @@ from .gas import GasConfig as GasConfig
 from .gas import GasContainers as GasContainers
 from .pendulum import PendulumConfig as PendulumConfig
 from .pendulum import PendulumEnergetic as PendulumEnergetic
-from .pendulum import PendulumTemperature as PendulumTemperature
+from .pendulum_temperature import PendulumTemperature as PendulumTemperature
 from .pendulum import entropy_to_temperature as entropy_to_temperature
 from .pendulum import temperature_to_entropy as temperature_to_entropy
 from .rigid_body import RigidBody as RigidBody

@@ -17,7 +17,8 @@ from ..data import Trajectories
 from ..integrate import RK4, AbstractScheme, solve
 from ._base import System
 from ._registry import get_system
-from .pendulum import PendulumEnergetic, PendulumTemperature
+from .pendulum import PendulumEnergetic
+from .pendulum_temperature import PendulumTemperature
 
 
 class Substeps(AbstractScheme):

@@ -7,7 +7,8 @@ from typing import Any
 from .._errors import MetriplexError
 from ._base import System
 from .gas import GasContainers
-from .pendulum import PendulumEnergetic, PendulumTemperature
+from .pendulum import PendulumEnergetic
+from .pendulum_temperature import PendulumTemperature
 from .rigid_body import RigidBody
 from .zoo import ZOO
 
