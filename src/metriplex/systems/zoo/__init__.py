@@ -12,62 +12,22 @@ Defaults are chosen on the cases with ``held_out=False`` and checked on the othe
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Mapping
+from . import (
+    charged_particle,
+    double_pendulum_friction,
+    heat_exchange,
+    oscillator_bath,
+    relaxing_rigid_body,
+    rlc_circuit,
+    spinning_satellite,
+    stiff_thermal_oscillator,
+    thermoelastic_chain,
+)
+from ._case import ZooCase as ZooCase
 
-from .._base import System
-
-
-@dataclasses.dataclass(frozen=True)
-class ZooCase:
-    """One zoo benchmark: a system, its data, and what the user tells metriplex.
-
-    - ``flags``: structure options as on the command line, without dashes
-      (``{"poisson": "canonical:2", "entropy": "sum:4"}``); every other setting is the default.
-    - ``trajectories`` training trajectories (validation is split from them) of ``steps`` steps
-      of size ``dt`` in the system's own time unit (``time_unit``, for the table).
-    - ``test_trajectories`` unseen initial conditions (another seed), rolled out for
-      ``test_steps`` steps (default ``steps``).
-    - ``held_out``: not used to choose defaults, only to check them.
-    """
-
-    system: System
-    flags: Mapping[str, str]
-    trajectories: int
-    steps: int
-    dt: float
-    time_unit: str = "s"
-    test_trajectories: int = 10
-    test_steps: int | None = None
-    held_out: bool = False
-    note: str = ""
-
-    @property
-    def name(self) -> str:
-        return self.system.name
-
-    @property
-    def horizon_steps(self) -> int:
-        return self.steps if self.test_steps is None else self.test_steps
-
-
-#: Every zoo case, by system name (filled in below, one line per system).
-ZOO: dict[str, ZooCase] = {}
-
-
-def _register() -> None:
-    from . import (
-        charged_particle,
-        double_pendulum_friction,
-        heat_exchange,
-        oscillator_bath,
-        relaxing_rigid_body,
-        rlc_circuit,
-        spinning_satellite,
-        stiff_thermal_oscillator,
-        thermoelastic_chain,
-    )
-
+#: Every zoo case, by system name, one line per system.
+ZOO: dict[str, ZooCase] = {
+    module.CASE.name: module.CASE
     for module in (
         oscillator_bath,
         double_pendulum_friction,
@@ -78,8 +38,5 @@ def _register() -> None:
         relaxing_rigid_body,
         spinning_satellite,
         stiff_thermal_oscillator,
-    ):
-        ZOO[module.CASE.name] = module.CASE
-
-
-_register()
+    )
+}

@@ -41,7 +41,7 @@ from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import Known, KnownFriction, KnownPoisson, SumOf
 from .._base import Settings, System
-from . import ZooCase
+from ._case import ZooCase
 
 
 @dataclasses.dataclass(frozen=True)

@@ -36,7 +36,7 @@ from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import Known, KnownFriction, SumOf, ZeroPoisson
 from .._base import Settings, System, _sample_box
-from . import ZooCase
+from ._case import ZooCase
 
 
 @dataclasses.dataclass(frozen=True)

@@ -37,7 +37,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import Known, KnownFriction, KnownPoisson
 from .._base import Settings, System
 from ..rigid_body import _lie_poisson
-from . import ZooCase
+from ._case import ZooCase
 
 
 @dataclasses.dataclass(frozen=True)

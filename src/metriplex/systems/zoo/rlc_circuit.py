@@ -32,7 +32,7 @@ from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
 from .._base import Settings, System, _sample_box
-from . import ZooCase
+from ._case import ZooCase
 
 
 @dataclasses.dataclass(frozen=True)

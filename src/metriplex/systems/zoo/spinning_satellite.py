@@ -41,7 +41,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import Known, KnownFriction, KnownPoisson, SumOf
 from .._base import Settings, System, _sample_box
 from ..rigid_body import _lie_poisson
-from . import ZooCase
+from ._case import ZooCase
 
 
 @dataclasses.dataclass(frozen=True)
