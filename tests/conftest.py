@@ -54,24 +54,17 @@ def pytest_configure(config):
 
 # -- one training run that the command-line tests share ----------------------------------------
 
-#: The options of the shared run (``trained_run``): 20 steps on 6 of the 8 trajectories, 4 and 5
-#: validating.
-TRAINED_RUN_OPTIONS = ("--entropy", "sum:2", "--poisson", "canonical:1", "--width", "8",
-                       "--steps", "20", "--trajectories", "0-5", "--validation-ids", "4,5",
-                       "--quiet")
-
-
 @pytest.fixture(scope="session")
 def trained_run(tmp_path_factory):
     """A folder with ``data.npz`` (``helpers.oscillator_data()``: 8 trajectories of 21 states,
     ids 0-7) and ``run/``, what ``metriplex train data.npz --out run`` with
-    TRAINED_RUN_OPTIONS wrote. Tests only read it (they write their outputs elsewhere).
+    ``helpers.TRAINED_RUN_OPTIONS`` wrote. Tests only read it (their outputs go elsewhere).
 
     A training costs a minute of compiling and figures on a busy CPU, so the command-line tests
-    that need a run folder share this one; they all go to one xdist worker (see
-    ``pytest_collection_modifyitems``), which trains it once.
+    that need a run folder share this one; they all go to one xdist worker (SHARED_TRAININGS),
+    which trains it once.
     """
-    from helpers import oscillator_data
+    from helpers import TRAINED_RUN_OPTIONS, oscillator_data
     from metriplex.cli import main
     from metriplex.io import write
 
@@ -85,10 +78,73 @@ def trained_run(tmp_path_factory):
     return folder
 
 
-@pytest.hookimpl(tryfirst=True)
+# -- one cosine-schedule training with an L-BFGS finish ----------------------------------------
+
+#: The run of ``cosine_lbfgs_run``: 300 Adam steps on a cosine schedule, then 100 L-BFGS
+#: iterations, evaluated every 50.
+COSINE_LBFGS_CONFIG = dict(entropy="sum:2", poisson="canonical:1", width=8, steps=300,
+                           eval_every=50, schedule="cosine", float64=True, lbfgs_steps=100)
+
+
+@pytest.fixture(scope="session")
+def cosine_lbfgs_run(tmp_path_factory):
+    """``(config, history)`` of ``train_run`` with COSINE_LBFGS_CONFIG on
+    ``make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20)``: its Adam stage is the cosine
+    schedule's test (test_schedule.py), its finish the L-BFGS test (test_lbfgs.py)."""
+    from helpers import damped_oscillator, make_data, oscillator_x0
+    from metriplex.config import RunConfig
+    from metriplex.runs import train_run
+
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
+    config = RunConfig(**COSINE_LBFGS_CONFIG)
+    _, history, *_ = train_run(data, config, tmp_path_factory.mktemp("cosine") / "run",
+                               progress=False)
+    return config, history
+
+
+# -- the tests that share a training run on one xdist worker ----------------------------------
+
+#: The session fixtures that train, with the tests that use them (nodeid prefixes).
+SHARED_TRAININGS = {
+    "trained_run": ("tests/test_cli.py::", "tests/test_rollout_ids.py::",
+                    "tests/test_trajectory_selection.py::",
+                    "tests/test_train.py::test_cli_divergence_keeps_the_best_model"),
+    "cosine_lbfgs_run": ("tests/test_lbfgs.py::", "tests/test_schedule.py::"),
+}
+
+
+def _shared_training(nodeid: str) -> str | None:
+    for fixture, prefixes in SHARED_TRAININGS.items():
+        if nodeid.startswith(prefixes):
+            return fixture
+    return None
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """With ``-n`` (xdist's ``load``), the tests of one SHARED_TRAININGS entry go to one worker
+    together, which then trains once instead of once per worker; every other test is scheduled
+    on its own, as with ``load``. (xdist's own ``--dist loadgroup`` would do this from
+    ``xdist_group`` marks, but xdist 3.8 cannot rename pytest 9's node ids.)"""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedTrainingScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return _shared_training(nodeid) or nodeid
+
+    return SharedTrainingScheduling(config, log)
+
+
 def pytest_collection_modifyitems(config, items):
-    """Tests that share the session's training run go to one xdist worker (``--dist
-    loadgroup``, pyproject.toml), which then trains it once, not once per worker."""
+    """A test that uses a shared training must be listed with it in SHARED_TRAININGS."""
     for item in items:
-        if "trained_run" in getattr(item, "fixturenames", ()):
-            item.add_marker(pytest.mark.xdist_group("trained_run"))
+        for fixture in SHARED_TRAININGS:
+            if (fixture in getattr(item, "fixturenames", ())
+                    and _shared_training(item.nodeid) != fixture):
+                raise pytest.UsageError(
+                    f"{item.nodeid} uses the session fixture {fixture!r}: add it to "
+                    "SHARED_TRAININGS in tests/conftest.py, so that the tests sharing that "
+                    "training run on one xdist worker"
+                )

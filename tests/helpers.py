@@ -83,3 +83,10 @@ def oscillator_data(k=8, n_t=21, names=("q", "p", "s")) -> mx.Trajectories:
     t = np.arange(n_t) * 0.1
     return mx.Trajectories.from_list(
         [(t, np.c_[np.cos(t + j), -np.sin(t + j), 0.01 * t + 0.1 * j]) for j in range(k)], names)
+
+
+#: The options of the session's shared training run (``trained_run`` in conftest.py): 20 steps
+#: on 6 of the 8 trajectories of ``oscillator_data()``, 4 and 5 validating.
+TRAINED_RUN_OPTIONS = ("--entropy", "sum:2", "--poisson", "canonical:1", "--width", "8",
+                       "--steps", "20", "--trajectories", "0-5", "--validation-ids", "4,5",
+                       "--quiet")

@@ -5,22 +5,14 @@ import pytest
 
 from metriplex._errors import MetriplexError
 from metriplex.config import RunConfig, validate
-from metriplex.runs import train_run
-from helpers import damped_oscillator, make_data, oscillator_x0
-
-CONFIG = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=300, eval_every=50,
-                   schedule="cosine", float64=True)
 
 
-@pytest.fixture(scope="module")
-def data():
-    return make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
-
-
-def test_lbfgs_finish_lowers_the_loss_and_keeps_the_better_model(tmp_path, data):
-    config = RunConfig(**{**CONFIG.to_json(), "lbfgs_steps": 100})
-    _, history, *_ = train_run(data, config, tmp_path / "run", progress=False)
-    adam = history.step.index(CONFIG.steps) + 1  # evaluations of the Adam stage
+def test_lbfgs_finish_lowers_the_loss_and_keeps_the_better_model(cosine_lbfgs_run):
+    # The session's run (tests/conftest.py): 300 cosine-schedule Adam steps, evaluated every
+    # 50, then lbfgs_steps=100; its Adam stage is also test_schedule's cosine run.
+    config, history = cosine_lbfgs_run
+    assert config.lbfgs_steps == 100 and config.eval_every == 50
+    adam = history.step.index(config.steps) + 1  # evaluations of the Adam stage
     # L-BFGS adds two evaluations of 50 iterations each.
     assert history.step[adam:] == [350, 400] and history.lbfgs_steps == 100
     # From the best Adam model, on the training pairs, the loss falls well below Adam's.

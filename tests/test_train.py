@@ -16,7 +16,8 @@ import optax
 import pytest
 
 import metriplex as mx
-from helpers import damped_oscillator, make_data, oscillator_x0, rigid_body, rigid_x0
+from helpers import (TRAINED_RUN_OPTIONS, damped_oscillator, make_data, oscillator_x0, rigid_body,
+                     rigid_x0)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -25,6 +26,10 @@ def _rollout_error(model, data):
     return mx.diagnostics.evaluate(model, data)["rollout_error_mean"]
 
 
+# 2000 steps of a width-32 model: an accuracy run (about 40 CPU-s, most of it training). The
+# default run keeps the check that a short fit learns in
+# test_units.py::test_training_is_the_same_in_other_units (validation loss down 20x in 300 steps).
+@pytest.mark.slow
 def test_fit_learns_damped_oscillator_far_better_than_untrained():
     # 24 training trajectories of 40 steps and 3 test trajectories of 60 steps from other
     # initial states, simulated together (one compiled rollout of the true model, not two).
@@ -131,6 +136,8 @@ def _checkpoint_step(path) -> int:
 
 def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     from metriplex.cli import main
+    from metriplex.config import RunConfig
+    from metriplex.runs import train_run
 
     data = _run_data(tmp_path)
     opts = [*RUN_OPTS, "--steps", str(STEPS), "--quiet"]
@@ -142,13 +149,19 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     if "JAX_COMPILATION_CACHE_DIR" not in env:
         env.update(JAX_COMPILATION_CACHE_DIR=str(tmp_path / "jax-cache"),
                    JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
-    assert main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "full"), *opts]) == 0
+    # The uninterrupted run is the training that `train` runs (RUN_OPTS, as a RunConfig; checked
+    # against the killed run's config.json below), without the evaluation and figures after it.
+    full = RunConfig(entropy="sum:2", poisson="canonical:1", eval_every=50, checkpoint_every=1,
+                     width=8, batch_size=64, float64=True, steps=STEPS)
+    train_run(data, full, tmp_path / "full", progress=False)
     cut = subprocess.run([sys.executable, "-c", KILLED_TRAIN, "train", str(tmp_path / "d.npz"),
                           "--out", str(tmp_path / "cut"), *opts],
                          capture_output=True, text=True, env=env, timeout=600)
     assert cut.returncode == -signal.SIGKILL, (cut.returncode, cut.stderr)
     assert not (tmp_path / "cut" / "model.mpx").exists(), "the run finished before the kill"
     assert _checkpoint_step(tmp_path / "cut" / "checkpoint.ckpt") == KILL_AT
+    assert (json.loads((tmp_path / "cut" / "config.json").read_text())["config"]
+            == json.loads((tmp_path / "full" / "config.json").read_text())["config"])
     assert main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "cut"), "--resume",
                  *opts]) == 0
     a = mx.load(tmp_path / "full")
@@ -198,14 +211,16 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     assert h["stopped"].startswith("interrupted at step") and len(h["step"]) >= 1
 
 
-def test_cli_divergence_keeps_the_best_model(tmp_path):
+def test_cli_divergence_keeps_the_best_model(trained_run, tmp_path):
     from metriplex.cli import main
 
-    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 30)
-    mx.write(tmp_path / "d.npz", data)
-    code = main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "run"), "--entropy",
-                 "sum:2", "--poisson", "canonical:1", "--lr", "1e12", "--steps", "400",
-                 "--eval-every", "10", "--width", "8", "--quiet"])
+    # The data and options of the session's shared run (tests/conftest.py), whose worker has
+    # compiled its rollouts and model already; here with a learning rate that diverges at once.
+    data = mx.read(trained_run / "data.npz")
+    options = list(TRAINED_RUN_OPTIONS)
+    options[options.index("--steps") + 1] = "400"
+    code = main(["train", str(trained_run / "data.npz"), "--out", str(tmp_path / "run"),
+                 *options, "--lr", "1e12", "--eval-every", "10"])
     assert code == 2
     assert (tmp_path / "run" / "model.mpx").exists()
     h = json.loads((tmp_path / "run" / "history.json").read_text())

@@ -71,6 +71,8 @@ def fit_in_the_first_units():
 def test_training_is_the_same_in_other_units(fit_in_the_first_units, time_factor, offset):
     a, f0 = fit_in_the_first_units
     b, f1 = _fit(_transformed(_data(), time_factor, offset), time_factor)
-    assert a.valid["total"][-1] < a.valid["total"][0] / 5  # it did learn something
+    # It learns: the validation loss falls 20x within 300 steps (measured: 270x). This is the
+    # default run's check that a short fit learns; test_train's full-size accuracy test is slow.
+    assert a.valid["total"][-1] < a.valid["total"][0] / 20
     np.testing.assert_allclose(a.valid["total"], b.valid["total"], rtol=1e-5)
     np.testing.assert_allclose(f0, f1, rtol=1e-4, atol=1e-6 * np.abs(f0).max())
