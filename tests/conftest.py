@@ -102,7 +102,14 @@ def cosine_lbfgs_run(tmp_path_factory):
     return config, history
 
 
-# -- the tests that share a training run on one xdist worker ----------------------------------
+# -- how xdist hands out the tests -------------------------------------------------------------
+#
+# Most of the suite's time is compiling, and a worker compiles a program once: the tests of a
+# file share their module fixtures, caches and compiled functions when they run on one worker.
+# So with ``-n`` a file's tests go to one worker together (as with ``--dist loadfile``), and so
+# do the tests of a session training (SHARED_TRAININGS), which is then trained once; the tests
+# of SPLIT_FILES, long and independent, are handed out one by one. The long work goes first
+# (LONG_FIRST), so that the workers do not end waiting on one long file.
 
 #: The session fixtures that train, with the tests that use them (nodeid prefixes).
 SHARED_TRAININGS = {
@@ -112,6 +119,36 @@ SHARED_TRAININGS = {
     "cosine_lbfgs_run": ("tests/test_lbfgs.py::", "tests/test_schedule.py::"),
 }
 
+#: Files whose tests are scheduled one by one (each long, nothing shared between them).
+SPLIT_FILES = ("tests/test_train.py",)
+
+#: Nodeid prefixes of the long work (measured CPU time on the 2-core VM), longest first;
+#: order only: what is not listed follows in collection order.
+LONG_FIRST = (
+    "tests/test_experiments.py::test_experiment_pipeline_writes_everything",
+    "tests/test_cli.py::",  # the trained_run group
+    "tests/test_train.py::test_resume_after_sigkill_matches_uninterrupted_run",
+    "tests/test_discrete_gradient.py::",
+    "tests/test_systems.py::",
+    "tests/test_exact_structure.py::",
+    "tests/test_verdict.py::",
+    "tests/test_lbfgs.py::",  # the cosine_lbfgs_run group
+    "tests/test_structure.py::",
+    "tests/test_losses.py::",
+    "tests/test_integrate.py::",
+    "tests/test_evaluation_progress.py::",
+    "tests/test_plain_reference.py::",
+    "tests/test_readme.py::",
+    "tests/test_parallel.py::",
+    "tests/test_pair_store.py::",
+    "tests/test_units.py::",
+    "tests/test_benchmarks.py::",
+    "tests/test_zoo_a.py::",
+    "tests/test_plots.py::",
+    "tests/test_zoo_b.py::",
+    "tests/test_train.py::test_ctrl_c_saves_a_checkpoint_and_the_run_resumes",
+)
+
 
 def _shared_training(nodeid: str) -> str | None:
     for fixture, prefixes in SHARED_TRAININGS.items():
@@ -120,25 +157,42 @@ def _shared_training(nodeid: str) -> str | None:
     return None
 
 
+def _scope(nodeid: str) -> str:
+    """The unit of work that one worker runs: a shared training's tests, one test of
+    SPLIT_FILES, or a file."""
+    path = nodeid.split("::", 1)[0]
+    return _shared_training(nodeid) or (nodeid if path in SPLIT_FILES else path)
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """With ``-n`` (xdist's ``load``), the tests of one SHARED_TRAININGS entry go to one worker
-    together, which then trains once instead of once per worker; every other test is scheduled
-    on its own, as with ``load``. (xdist's own ``--dist loadgroup`` would do this from
-    ``xdist_group`` marks, but xdist 3.8 cannot rename pytest 9's node ids.)"""
+    """With ``-n`` (xdist's ``load``): the scopes of ``_scope``, handed out in the workers'
+    collection order (``pytest_collection_modifyitems``). (xdist's ``--dist loadgroup`` would
+    group by ``xdist_group`` marks, but xdist 3.8 cannot rename pytest 9's node ids.)"""
     if config.getvalue("dist") != "load":
         return None
     from xdist.scheduler import LoadScopeScheduling
 
-    class SharedTrainingScheduling(LoadScopeScheduling):
+    class SharedWorkScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            return _shared_training(nodeid) or nodeid
+            return _scope(nodeid)
 
-    return SharedTrainingScheduling(config, log)
+    # In collection order, not by the number of tests in a scope.
+    config.option.loadscopereorder = False
+    return SharedWorkScheduling(config, log)
+
+
+def _rank(item) -> int:
+    ranks = [i for i, prefix in enumerate(LONG_FIRST) if _scope(prefix) == _scope(item.nodeid)]
+    return min(ranks, default=len(LONG_FIRST))
 
 
 def pytest_collection_modifyitems(config, items):
-    """A test that uses a shared training must be listed with it in SHARED_TRAININGS."""
+    """A test that uses a shared training must be listed with it in SHARED_TRAININGS. In an
+    xdist worker, the scopes of LONG_FIRST come first (every worker orders its collection
+    alike, and the scheduler hands the scopes out in that order)."""
+    if hasattr(config, "workerinput"):
+        items.sort(key=_rank)  # stable: collection order otherwise
     for item in items:
         for fixture in SHARED_TRAININGS:
             if (fixture in getattr(item, "fixturenames", ())
