@@ -6,9 +6,16 @@ import os
 import time
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+# Compiling is most of the suite's time, and the tests' programs are small and short: XLA's
+# backend optimisations (LLVM at -O0, no expensive passes) cost more than they save. They change
+# no semantics (no fast math either way). Inherited by the processes that tests start; set
+# JAX_DISABLE_MOST_OPTIMIZATIONS=0 to test the optimised programs.
+os.environ.setdefault("JAX_DISABLE_MOST_OPTIMIZATIONS", "1")
 
 import jax  # noqa: E402
 
+jax.config.update("jax_disable_most_optimizations",
+                  os.environ["JAX_DISABLE_MOST_OPTIMIZATIONS"].lower() not in ("0", "false"))
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 jax.config.update("jax_numpy_dtype_promotion", "strict")
