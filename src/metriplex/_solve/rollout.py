@@ -107,10 +107,11 @@ def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") 
     name = getattr(scheme, "name", "") or type(scheme).__name__
     span = f"from t={t0:.6g} to t={t1:.6g}{where}"
     if isinstance(scheme, _Implicit):
+        newton = "" if scheme.solver == "newton" else "the Newton solver (--solver newton), "
         return (
             f"the implicit {name} step {span} did not converge (solver {scheme.solver!r}). Try "
-            "the Newton solver (--solver newton), a smaller time step, or RK4 (--scheme rk4) "
-            "to see whether the model itself blows up"
+            f"{newton}a smaller time step, or RK4 (--scheme rk4) to see whether the model "
+            "itself blows up"
         )
     return (
         f"the explicit {name} step {span} gave a non-finite state: the model's vector field "
