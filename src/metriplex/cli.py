@@ -14,14 +14,25 @@ import sys
 from ._commands import (_config_from_args, _train_summary, cmd_evaluate, cmd_reproduce,
                         cmd_rollout, cmd_simulate, cmd_train)
 from ._errors import MetriplexError
+from ._solve._implicit import SOLVER_SUMMARIES
+from .integrate import SCHEMES, SOLVERS
 
 #: ``_config_from_args`` and ``_train_summary`` live in _commands; importable from here as before.
 __all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "_config_from_args", "_train_summary",
            "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
            "cmd_train", "main"]
 
-#: integrate.SOLVERS, spelled out so that building the parser does not import JAX.
-_SOLVERS = ("auto", "newton", "fixed-point")
+
+
+def _scheme_help(prefix: str, default: str) -> str:
+    """``--scheme``'s help, from the registry: every scheme's name and summary."""
+    names = " | ".join(f"{name} ({cls.summary})" for name, cls in SCHEMES.items())
+    return f"{prefix}{names} ({default})"
+
+
+def _solver_help() -> str:
+    """``--solver``'s help, from the implicit schemes' solver table."""
+    return "implicit steps: " + " | ".join(f"{k} ({v})" for k, v in SOLVER_SUMMARIES.items())
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 3
@@ -45,25 +56,22 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _add_structure_options(p: argparse.ArgumentParser) -> None:
-    from .config import SCHEDULES, RunConfig
+    from .config import (ENERGY_CHOICES, ENTROPY_CHOICES, FRICTION_CHOICES, JACOBI_CHOICES,
+                         POISSON_CHOICES, SCHEDULES, RunConfig, choices_help)
 
     d = RunConfig()
     g = p.add_argument_group("structure (what is learned, what is given)")
-    g.add_argument("--energy", help="neural (default)")
-    g.add_argument("--entropy", help="neural (default) | sum:I,J,... (S = sum of those "
-                   "components, counted from 0) | zero")
-    g.add_argument("--poisson", help="neural (default) | canonical:K (first K positions, next "
-                   "K momenta) | zero | casimir3 (n = 3, Jacobi exact) | lie-poisson (learned, "
-                   "linear in the state) | file:PATH (a constant L from .npy, .npz or .mat)")
-    g.add_argument("--friction", help="neural (default) | zero | file:PATH (a constant M from "
-                   ".npy, .npz or .mat)")
+    g.add_argument("--energy", help=choices_help(ENERGY_CHOICES))
+    g.add_argument("--entropy", help=choices_help(ENTROPY_CHOICES))
+    g.add_argument("--poisson", help=choices_help(POISSON_CHOICES))
+    g.add_argument("--friction", help=choices_help(FRICTION_CHOICES))
     g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
                    "penalties otherwise) | soft (penalties only) | exact (L and M by "
                    "construction)")
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")
-    g.add_argument("--jacobi", help="none | exact | stochastic (Jacobi-identity penalty)")
+    g.add_argument("--jacobi", help="Jacobi-identity penalty: " + choices_help(JACOBI_CHOICES))
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "
                    "is evaluated on (default: all; fewer is cheaper, still unbiased)")
@@ -74,8 +82,7 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
                    f"energy, entropy, friction (default {d.features_for})")
-    g.add_argument("--scheme", help="training residual scheme: cn (default) | midpoint | "
-                   "discrete-gradient | rk4")
+    g.add_argument("--scheme", help=_scheme_help("training residual scheme: ", "default cn"))
     w = p.add_argument_group("loss weights and optimisation")
     w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
     w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,
@@ -179,11 +186,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", metavar="DATA", help="trajectories to predict (format below)")
     p.add_argument("--out", required=True,
                    help="predictions, in the data format: .npz, .csv, .h5 or .mat")
-    p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
-                   "scheme the run was trained with)")
-    p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
-                   "iteration, Newton where it does not converge) | newton (stiff models) | "
-                   "fixed-point")
+    p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
+                                                 "with"))
+    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
     p.add_argument("--trajectories", metavar="IDS",
                    help=f"predict only these trajectory ids of DATA, {_IDS} (default: all)")
     p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
@@ -198,11 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", metavar="METRICS.json",
                    help="write the metrics as strict JSON here (default: print a summary only)")
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
-    p.add_argument("--scheme", help="cn | midpoint | discrete-gradient | rk4 (default: the "
-                   "scheme the run was trained with)")
-    p.add_argument("--solver", choices=_SOLVERS, help="implicit steps: auto (default: fixed-point "
-                   "iteration, Newton where it does not converge) | newton (stiff models) | "
-                   "fixed-point")
+    p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
+                                                 "with"))
+    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
     p.add_argument("--trajectories", metavar="IDS",
                    help=f"evaluate only these trajectory ids of DATA, {_IDS} (default: all; "

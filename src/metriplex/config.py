@@ -124,11 +124,11 @@ def _choice(value: str, allowed: tuple[str, ...], option: str) -> str:
 
 def validate(config: RunConfig, n: int) -> None:
     """Check that every structure option fits data with ``n`` variables."""
-    _choice(config.energy, ("neural",), "--energy")
-    head = _choice(config.entropy, ("neural", "sum", "zero"), "--entropy")
+    _choice(config.energy, tuple(ENERGY_CHOICES), "--energy")
+    head = _choice(config.entropy, tuple(ENTROPY_CHOICES), "--entropy")
     if head == "sum":
         _indices(config.entropy.partition(":")[2], n, "--entropy sum:I,J,...")
-    head = _choice(config.poisson, POISSON_CHOICES, "--poisson")
+    head = _choice(config.poisson, tuple(POISSON_CHOICES), "--poisson")
     if head == "file":
         _known_poisson(config, n)
     if head == "canonical":
@@ -157,11 +157,11 @@ def validate(config: RunConfig, n: int) -> None:
             )
     if head == "casimir3" and n != 3:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
-    if _choice(config.friction, FRICTION_CHOICES, "--friction") == "file":
+    if _choice(config.friction, tuple(FRICTION_CHOICES), "--friction") == "file":
         _known_friction(config, n)
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
     _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
-    _choice(config.jacobi, ("none", "exact", "stochastic"), "--jacobi")
+    _choice(config.jacobi, tuple(JACOBI_CHOICES), "--jacobi")
     if config.features not in ("none", *FEATURES):
         raise MetriplexError(
             f"--features must be 'none' or one of {sorted(FEATURES)}; got {config.features!r}."
@@ -283,9 +283,40 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     return blocks
 
 
-#: ``--poisson`` and ``--friction`` choices (``file:PATH`` reads a constant matrix).
-POISSON_CHOICES = ("neural", "canonical", "zero", "casimir3", "lie-poisson", "file")
-FRICTION_CHOICES = ("neural", "zero", "file")
+#: What each structure option may say (the part before any ``:``), with its help text: the
+#: command line's help and this module's checks both read these tables, so a new spelling is
+#: one line here plus its case where the block is built (``_known_*`` below, ``_build``).
+ENERGY_CHOICES = {"neural": "neural (default)"}
+ENTROPY_CHOICES = {
+    "neural": "neural (default)",
+    "sum": "sum:I,J,... (S = sum of those components, counted from 0)",
+    "zero": "zero",
+}
+POISSON_CHOICES = {
+    "neural": "neural (default)",
+    "canonical": "canonical:K (first K positions, next K momenta)",
+    "zero": "zero",
+    "casimir3": "casimir3 (n = 3, Jacobi exact)",
+    "lie-poisson": "lie-poisson (learned, linear in the state)",
+    "file": "file:PATH (a constant L from .npy, .npz or .mat)",
+}
+FRICTION_CHOICES = {
+    "neural": "neural (default)",
+    "zero": "zero",
+    "file": "file:PATH (a constant M from .npy, .npz or .mat)",
+}
+JACOBI_CHOICES = {
+    "none": "none (default)",
+    "exact": "exact",
+    "stochastic": "stochastic (random probes; see --jacobi-probes, --jacobi-samples)",
+}
+
+
+def choices_help(table: dict[str, str]) -> str:
+    """One option's choices as its help text lists them: ``a (default) | b:K (...) | ...``."""
+    return " | ".join(table.values())
+
+
 LEARNED_POISSON = ("neural", "casimir3", "lie-poisson")
 
 

@@ -27,7 +27,13 @@ class _FixedPointIteration(optx.FixedPointIteration):
         return type(state)(jnp.array(jnp.inf, jnp.result_type(y)))
 
 
-SOLVERS = ("auto", "newton", "fixed-point")
+#: The solvers of an implicit step, with what the command line's help says of each.
+SOLVER_SUMMARIES = {
+    "auto": "fixed-point iteration, Newton where it does not converge; the default",
+    "newton": "Newton's method from the start, for stiff models",
+    "fixed-point": "fixed-point iteration only",
+}
+SOLVERS = tuple(SOLVER_SUMMARIES)
 
 
 class _Implicit(AbstractScheme):

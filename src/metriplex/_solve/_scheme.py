@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import abc
-from typing import ClassVar
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -21,9 +19,15 @@ def _tolerance(value: float | None, dtype) -> float:
 
 
 class AbstractScheme(eqx.Module):
-    """A one-step time integrator for a :class:`~metriplex.GenericModel`."""
+    """A one-step time integrator for a :class:`~metriplex.GenericModel`.
 
-    name: ClassVar[str] = ""
+    A concrete scheme declares its ``name`` (how the command line and the files spell it) and
+    a one-line ``summary`` (what the command line's help says of it); adding a scheme is its
+    class in its own file plus one line in :data:`metriplex.integrate.SCHEMES`.
+    """
+
+    name: eqx.AbstractClassVar[str]
+    summary: eqx.AbstractClassVar[str]
 
     @abc.abstractmethod
     def step(self, model: GenericModel, x: State, dt, guess: State):

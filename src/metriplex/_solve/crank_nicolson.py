@@ -13,6 +13,7 @@ class CrankNicolson(_Implicit):
     \tfrac12\big(f(x_n) + f(x_{n+1})\big)`. Second order; the seed paper's scheme."""
 
     name: ClassVar[str] = "cn"
+    summary: ClassVar[str] = "Crank-Nicolson, the paper's scheme"
 
     def start(self, model, x0):
         return model.vector_field(x0)

@@ -118,6 +118,7 @@ class DiscreteGradient(_Implicit):
     """
 
     name: ClassVar[str] = "discrete-gradient"
+    summary: ClassVar[str] = "keeps any learned E exactly and dS >= 0"
 
     def start(self, model, x0):
         return model.energy(x0), model.entropy(x0)

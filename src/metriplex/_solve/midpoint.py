@@ -13,6 +13,7 @@ class ImplicitMidpoint(_Implicit):
     Second order, symplectic; conserves quadratic invariants exactly."""
 
     name: ClassVar[str] = "midpoint"
+    summary: ClassVar[str] = "implicit midpoint: keeps a quadratic E"
 
     def average(self, model, x0, x1, start):
         return model.vector_field(0.5 * (x0 + x1))

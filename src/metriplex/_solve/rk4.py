@@ -13,6 +13,7 @@ class RK4(AbstractScheme):
     """Classical explicit fourth-order Runge–Kutta (a reference scheme; no structure kept)."""
 
     name: ClassVar[str] = "rk4"
+    summary: ClassVar[str] = "explicit, fourth order: no implicit solve"
 
     def advance(self, model, x, dt):
         f = model.vector_field

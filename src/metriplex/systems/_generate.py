@@ -34,6 +34,7 @@ class Substeps(AbstractScheme):
     """
 
     name: ClassVar[str] = "substeps"
+    summary: ClassVar[str] = "several steps of an inner scheme per recorded step"
     inner: AbstractScheme
     count: int = eqx.field(static=True)
 

@@ -1,0 +1,47 @@
+"""The command line's choices and help come from the registries, so adding a scheme or a
+structure spelling is one class (or one table line), never an edit of the help text."""
+
+import re
+
+import pytest
+
+from metriplex import config
+from metriplex.cli import build_parser
+from metriplex.integrate import SCHEMES, SOLVERS, AbstractScheme
+
+
+def _help(command: str, monkeypatch) -> str:
+    monkeypatch.setenv("COLUMNS", "10000")  # one line per option: no wrapping at hyphens
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return re.sub(r"\s+", " ", sub.choices[command].format_help())
+
+
+@pytest.mark.parametrize("command", ["train", "rollout", "evaluate"])
+def test_every_registered_scheme_is_in_the_help_with_its_summary(command, monkeypatch):
+    text = _help(command, monkeypatch)
+    for name, cls in SCHEMES.items():
+        assert f"{name} ({cls.summary})" in text
+    if command != "train":
+        for solver in SOLVERS:
+            assert solver in text
+
+
+@pytest.mark.parametrize("table", ["ENERGY_CHOICES", "ENTROPY_CHOICES", "POISSON_CHOICES",
+                                   "FRICTION_CHOICES", "JACOBI_CHOICES"])
+def test_structure_options_list_every_spelling_the_checks_accept(table, monkeypatch):
+    text = _help("train", monkeypatch)
+    for spelling in getattr(config, table).values():
+        assert re.sub(r"\s+", " ", spelling) in text
+
+
+def test_a_scheme_without_a_name_and_summary_cannot_be_made():
+    class Nameless(AbstractScheme):
+        def step(self, model, x, dt, guess):
+            return x, True, 0
+
+        def residual(self, model, x0, x1, dt, terms0, terms1):
+            return x1 - x0
+
+    with pytest.raises(TypeError):
+        Nameless()
