@@ -22,39 +22,38 @@ from .._types import Matrix, Scalar, State
 from ._registry import not_serialisable
 
 
-class AbstractPotential(eqx.Module):
+class _AbstractBlock(eqx.Module):
+    """What every block offers: its spec for a model file (none by default: a block that wraps
+    code cannot be written)."""
+
+    def spec(self) -> dict[str, Any]:
+        raise not_serialisable(self)
+
+
+class AbstractPotential(_AbstractBlock):
     """A scalar function of the state."""
 
     @abc.abstractmethod
     def __call__(self, x: State) -> Scalar: ...
 
-    def spec(self) -> dict[str, Any]:
-        raise not_serialisable(self)
 
+class _AbstractMatrix(_AbstractBlock):
+    """A matrix field called with the state and a potential's gradient."""
 
-class AbstractPoisson(eqx.Module):
-    """An antisymmetric matrix field ``L(x)``."""
-
-    #: Whether the matrix depends on the ``grad_entropy`` argument (exactly degenerate
-    #: blocks); if not, a matrix computed with another gradient can be reused.
+    #: Whether the matrix depends on the gradient argument (exactly degenerate blocks); if not,
+    #: a matrix computed with another gradient can be reused.
     uses_gradient: eqx.AbstractClassVar[bool]
+
+
+class AbstractPoisson(_AbstractMatrix):
+    """An antisymmetric matrix field ``L(x)``."""
 
     @abc.abstractmethod
     def __call__(self, x: State, grad_entropy: State) -> Matrix: ...
 
-    def spec(self) -> dict[str, Any]:
-        raise not_serialisable(self)
 
-
-class AbstractFriction(eqx.Module):
+class AbstractFriction(_AbstractMatrix):
     """A symmetric positive semi-definite matrix field ``M(x)``."""
-
-    #: Whether the matrix depends on the ``grad_energy`` argument (exactly degenerate
-    #: blocks); if not, a matrix computed with another gradient can be reused.
-    uses_gradient: eqx.AbstractClassVar[bool]
 
     @abc.abstractmethod
     def __call__(self, x: State, grad_energy: State) -> Matrix: ...
-
-    def spec(self) -> dict[str, Any]:
-        raise not_serialisable(self)

@@ -1,11 +1,15 @@
 r"""The projector that makes a learned matrix exactly degenerate: the vectors of
-:math:`Q = I - D^2 g g^\top/(|Dg|^2 + \varepsilon^2)` for a potential's gradient :math:`g`, shared by
+:math:`Q = I - D^2 g g^\top/(|Dg|^2 + \varepsilon^2)` for a potential's gradient :math:`g`, and
+:class:`AbstractProjected`, what the two blocks built with it share:
 :class:`~metriplex.ProjectedSkewMLPPoisson` (:math:`L\nabla S = 0`) and
 :class:`~metriplex.ProjectedCholeskyFriction` (:math:`M\nabla E = 0`).
 """
 
 from __future__ import annotations
 
+from typing import Any, ClassVar
+
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -49,3 +53,38 @@ def projector_vectors(g: State, scale: tuple[float, ...] | None, eps: float):
     e2 = max(eps * eps, float(jnp.finfo(g.dtype).tiny))
     r = jax.lax.rsqrt(jnp.sum(h * h) + jnp.asarray(e2, g.dtype))
     return g * r, d2g * r
+
+
+class AbstractProjected(eqx.Module):
+    """A learned network of its family (``network``, built from the same options) whose matrix
+    is projected against a potential's gradient with the regulariser ``eps``; saved as the
+    network's spec plus ``eps``."""
+
+    network: ClassVar[type]
+    base: eqx.Module
+    n: int = eqx.field(static=True)
+    eps: float | None = eqx.field(static=True)
+
+    def __init__(self, n: int, *, eps: float | None = None, key, **options: Any):
+        check_eps(eps)
+        self.base = self.network(n, key=key, **options)
+        self.n = n
+        self.eps = None if eps is None else float(eps)
+
+    @property
+    def scaling(self):
+        return self.base.scaling
+
+    def _projector(self, gradient: State, dtype):
+        """:math:`\\hat g, \\hat u` of :func:`projector_vectors` in the network's scaling."""
+        s = self.base.scaling
+        return projector_vectors(
+            gradient, None if s is None else s.scale, default_eps(self.eps, dtype)
+        )
+
+    def spec(self):
+        return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls(n, **cls.network.spec_options(spec), eps=spec.get("eps"), key=key)

@@ -6,6 +6,7 @@ r"""Learned 3-D Poisson bivectors that satisfy the Jacobi identity by constructi
 from __future__ import annotations
 
 import abc
+import functools
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -62,11 +63,31 @@ _SOFTPLUS_ONE = float(np.log(np.e - 1.0))  # softplus(_SOFTPLUS_ONE) = 1
 
 class _AbstractCasimir3(AbstractPoisson):
     r"""Shared code of the 3-D bivectors :math:`L = D\,[\tilde w]_\times D`,
-    :math:`\tilde w = \varphi(z)\,\tilde c(z)` on standardised :math:`z = D^{-1}(x - c)`."""
+    :math:`\tilde w = \varphi(z)\,\tilde c(z)` on standardised :math:`z = D^{-1}(x - c)`: the
+    constructor (the scalar networks are the subclass's), the assembly and the spec."""
 
     phi: _Scalar
     n: int = eqx.field(static=True)
     scaling: Scaling | None = eqx.field(static=True)
+
+    def __init__(
+        self,
+        n: int = 3,
+        *,
+        width: int = 64,
+        depth: int = 2,
+        activation: str = "softplus",
+        scaling: Scaling | None = None,
+        key,
+    ):
+        _check_three(n, type(self).__name__)
+        self._init_scalars(functools.partial(_Scalar, width, depth, activation), key)
+        self.n = n
+        self.scaling = scaling
+
+    @abc.abstractmethod
+    def _init_scalars(self, scalar, key) -> None:
+        """Set the scalar networks, each made by ``scalar(key=...)``."""
 
     def _z(self, x: State) -> State:
         s = self.scaling
@@ -85,13 +106,18 @@ class _AbstractCasimir3(AbstractPoisson):
         # f d_i d_j as one symmetric factor keeps L exactly antisymmetric.
         return L * jnp.asarray(s.congruence(), L.dtype)
 
-    def _spec_common(self) -> dict[str, Any]:
+    def spec(self) -> dict[str, Any]:
         return {
+            "kind": self.kind,
             "width": self.phi.out.in_features,
             "depth": len(self.phi.hidden.layers),
             "activation": self.phi.hidden.activation,
             "scaling": scaling_spec(self.scaling),
         }
+
+    @classmethod
+    def from_spec(cls, spec, n, *, key):
+        return cls(n, **network_kwargs(spec), key=key)
 
 
 @register("poisson", "casimir3")
@@ -126,22 +152,10 @@ class CasimirPoisson3(_AbstractCasimir3):
 
     casimir: _Scalar
 
-    def __init__(
-        self,
-        n: int = 3,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
-        scaling: Scaling | None = None,
-        key,
-    ):
-        _check_three(n, "CasimirPoisson3")
+    def _init_scalars(self, scalar, key) -> None:
         k1, k2 = jr.split(key)
-        self.phi = _Scalar(width, depth, activation, key=k1)
-        self.casimir = _Scalar(width, depth, activation, key=k2)
-        self.n = n
-        self.scaling = scaling
+        self.phi = scalar(key=k1)
+        self.casimir = scalar(key=k2)
 
     def _factor(self, z: State):
         return jax.nn.softplus(self.phi(z) + _SOFTPLUS_ONE)
@@ -151,17 +165,6 @@ class CasimirPoisson3(_AbstractCasimir3):
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         z = self._z(x)
         return self._assemble(z, jax.grad(self.casimir)(z))
-
-    def spec(self):
-        return {"kind": "casimir3", **self._spec_common()}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            key=key,
-        )
 
 
 @register("poisson", "casimir3-entropy")
@@ -178,20 +181,8 @@ class EntropyCasimirPoisson3(_AbstractCasimir3):
     orientation of :math:`w` relative to the given :math:`\nabla S` must be learnable.
     """
 
-    def __init__(
-        self,
-        n: int = 3,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
-        scaling: Scaling | None = None,
-        key,
-    ):
-        _check_three(n, "EntropyCasimirPoisson3")
-        self.phi = _Scalar(width, depth, activation, key=key)
-        self.n = n
-        self.scaling = scaling
+    def _init_scalars(self, scalar, key) -> None:
+        self.phi = scalar(key=key)
 
     def _factor(self, z: State):
         # 1 + network: at initialisation L ~ [grad S]_x rather than ~0.
@@ -203,14 +194,3 @@ class EntropyCasimirPoisson3(_AbstractCasimir3):
         s = self.scaling
         h = grad_entropy if s is None else jnp.asarray(s.scale, x.dtype) * grad_entropy
         return self._assemble(self._z(x), h)
-
-    def spec(self):
-        return {"kind": "casimir3-entropy", **self._spec_common()}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            key=key,
-        )

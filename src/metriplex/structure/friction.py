@@ -20,7 +20,7 @@ from ._mlp import FoldedHead, Hidden, data_statistics, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
-from ._projection import check_eps, default_eps, projector_vectors
+from ._projection import AbstractProjected
 from .potential import FeatureMap
 from .scaling import Scaling, scaling_spec
 
@@ -109,17 +109,19 @@ class CholeskyFriction(AbstractFriction):
                                                                    self.input_stats],
         }
 
+    @staticmethod
+    def spec_options(spec) -> dict[str, Any]:
+        """The constructor's options saved in ``spec``."""
+        feats = spec.get("features")
+        return {
+            **network_kwargs(spec),
+            "features": None if feats is None else FeatureMap(**feats),
+            "input_stats": spec.get("input_stats"),
+        }
+
     @classmethod
     def from_spec(cls, spec, n, *, key):
-        return cls(n, **network_kwargs(spec), **_feature_kwargs(spec), key=key)
-
-
-def _feature_kwargs(spec) -> dict[str, Any]:
-    feats = spec.get("features")
-    return {
-        "features": None if feats is None else FeatureMap(**feats),
-        "input_stats": spec.get("input_stats"),
-    }
+        return cls(n, **cls.spec_options(spec), key=key)
 
 
 @register("friction", "zero")
@@ -139,7 +141,7 @@ class KnownFriction(AbstractFunctionMatrix, AbstractFriction):
 
 
 @register("friction", "projected-mlp")
-class ProjectedCholeskyFriction(AbstractFriction):
+class ProjectedCholeskyFriction(AbstractProjected, AbstractFriction):
     r"""Learned :math:`M` with :math:`M\nabla E = 0` by construction: :math:`M = F F^\top`,
     :math:`F = Q B`.
 
@@ -159,44 +161,17 @@ class ProjectedCholeskyFriction(AbstractFriction):
     :math:`|D\nabla E| > \sqrt{\text{machine eps}}` with the default :math:`\varepsilon` (machine
     epsilon of the dtype); where :math:`\nabla E \to 0`, :math:`M \to BB^\top` smoothly (no NaN).
     Then :math:`dE/dt = \nabla E^\top L\nabla E + (M\nabla E)^\top\nabla S = 0` to rounding.
+
+    Options: ``eps`` (:math:`\varepsilon`; ``None``, the default, is machine epsilon) and those
+    of :class:`CholeskyFriction` (``width``, ``depth``, ``activation``, ``scaling``,
+    ``features``, ``data``, ``input_stats``), which builds :math:`B`.
     """
 
-    base: CholeskyFriction
-    n: int = eqx.field(static=True)
-    eps: float | None = eqx.field(static=True)
-
-    def __init__(
-        self,
-        n: int,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
-        scaling: Scaling | None = None,
-        features: FeatureMap | None = None,
-        data=None,
-        input_stats=None,
-        eps: float | None = None,
-        key,
-    ):
-        check_eps(eps)
-        self.base = CholeskyFriction(
-            n, width=width, depth=depth, activation=activation, scaling=scaling,
-            features=features, data=data, input_stats=input_stats, key=key,
-        )
-        self.n = n
-        self.eps = None if eps is None else float(eps)
-
-    @property
-    def scaling(self) -> Scaling | None:
-        return self.base.scaling
+    network: ClassVar[type] = CholeskyFriction
 
     def factor(self, x: State, grad_energy: State) -> Matrix:
         B = self.base.factor(x)
-        s = self.base.scaling
-        g_hat, u_hat = projector_vectors(
-            grad_energy, None if s is None else s.scale, default_eps(self.eps, x.dtype)
-        )
+        g_hat, u_hat = self._projector(grad_energy, x.dtype)
         return B - jnp.outer(u_hat, g_hat @ B)
 
     uses_gradient: ClassVar[bool] = True
@@ -204,11 +179,3 @@ class ProjectedCholeskyFriction(AbstractFriction):
     def __call__(self, x: State, grad_energy: State) -> Matrix:
         F = self.factor(x, grad_energy)
         return F @ F.T
-
-    def spec(self):
-        return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(n, **network_kwargs(spec), **_feature_kwargs(spec), eps=spec.get("eps"),
-                   key=key)

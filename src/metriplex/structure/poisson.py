@@ -6,7 +6,7 @@ passed so that exactly degenerate variants (:math:`L\nabla S = 0` by constructio
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -19,7 +19,7 @@ from ._mlp import FoldedHead, Hidden, standardise
 from ._abstract import AbstractPoisson
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
-from ._projection import check_eps, default_eps, projector_vectors
+from ._projection import AbstractProjected
 from .scaling import Scaling, scaling_spec
 
 
@@ -73,13 +73,14 @@ class SkewMLPPoisson(AbstractPoisson):
             "scaling": scaling_spec(self.scaling),
         }
 
+    @staticmethod
+    def spec_options(spec) -> dict[str, Any]:
+        """The constructor's options saved in ``spec``."""
+        return network_kwargs(spec)
+
     @classmethod
     def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            key=key,
-        )
+        return cls(n, **cls.spec_options(spec), key=key)
 
 
 @register("poisson", "canonical")
@@ -139,7 +140,7 @@ class KnownPoisson(AbstractFunctionMatrix, AbstractPoisson):
 
 
 @register("poisson", "projected-mlp")
-class ProjectedSkewMLPPoisson(AbstractPoisson):
+class ProjectedSkewMLPPoisson(AbstractProjected, AbstractPoisson):
     r"""Learned :math:`L` with :math:`L\nabla S = 0` by construction: :math:`L = Q A Q^\top`.
 
     :math:`A(x)` is a :class:`SkewMLPPoisson` (same network, same normalisation congruence
@@ -168,60 +169,25 @@ class ProjectedSkewMLPPoisson(AbstractPoisson):
     degenerate :math:`L` must vanish at a non-degenerate critical point) and are capped at
     :math:`\sim 1/\varepsilon`.
 
+    Options: ``eps`` (:math:`\varepsilon`; ``None``, the default, is machine epsilon) and those
+    of :class:`SkewMLPPoisson` (``width``, ``depth``, ``activation``, ``scaling``), which builds
+    :math:`A`.
+
     ```python
     L = ProjectedSkewMLPPoisson(10, key=jr.key(0))
     L(x, grad_entropy) @ grad_entropy  # ~ 0
     ```
     """
 
-    base: SkewMLPPoisson
-    n: int = eqx.field(static=True)
-    eps: float | None = eqx.field(static=True)
-
-    def __init__(
-        self,
-        n: int,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
-        scaling: Scaling | None = None,
-        eps: float | None = None,
-        key,
-    ):
-        check_eps(eps)
-        self.base = SkewMLPPoisson(
-            n, width=width, depth=depth, activation=activation, scaling=scaling, key=key
-        )
-        self.n = n
-        self.eps = None if eps is None else float(eps)
-
-    @property
-    def scaling(self) -> Scaling | None:
-        return self.base.scaling
+    network: ClassVar[type] = SkewMLPPoisson
 
     uses_gradient: ClassVar[bool] = True
 
     def __call__(self, x: State, grad_entropy: State) -> Matrix:
         A = self.base(x)
-        s = self.base.scaling
-        g_hat, u_hat = projector_vectors(
-            grad_entropy, None if s is None else s.scale, default_eps(self.eps, x.dtype)
-        )
+        g_hat, u_hat = self._projector(grad_entropy, x.dtype)
         # L = K - K^T with K = A/2 - b u^T. Not A - (W - W^T): the compiler may fuse one of the
         # two products of W - W^T into an FMA and break exact antisymmetry; each K_ij is one
         # deterministic expression, so K_ij - K_ji = -(K_ji - K_ij) exactly.
         K = 0.5 * A - jnp.outer(A @ g_hat, u_hat)
         return K - K.T
-
-    def spec(self):
-        return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
-
-    @classmethod
-    def from_spec(cls, spec, n, *, key):
-        return cls(
-            n,
-            **network_kwargs(spec),
-            eps=spec.get("eps"),
-            key=key,
-        )

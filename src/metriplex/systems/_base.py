@@ -1,4 +1,7 @@
-"""What every ground-truth system offers: its model, variable names, sampling and settings."""
+"""What every ground-truth system offers: its model, variable names, sampling and settings,
+and what the systems share to build them: :func:`analytic_model` (a model from analytic
+functions of the state and known blocks) and the two ways of drawing initial states, in a box
+(:class:`BoxSampling`) or in a ball (:class:`BallSampling`)."""
 
 from __future__ import annotations
 
@@ -6,13 +9,16 @@ import abc
 import dataclasses
 import functools
 import typing
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
+import equinox as eqx
 import numpy as np
 from jaxtyping import Float
 
 from .._errors import MetriplexError
 from .._model import GenericModel
+from .._types import State
+from ..structure import Known, KnownFriction, KnownPoisson
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,7 +44,9 @@ class System(abc.ABC):
     :math:`E, S, L, M`, the names of its variables and how its initial states are drawn.
 
     Concrete systems are frozen dataclasses holding one typed, frozen ``config``; use
-    :meth:`with_params` (or :func:`metriplex.systems.get_system`) for other parameters.
+    :meth:`with_params` (or :func:`metriplex.systems.get_system`) for other parameters. Where
+    ``names``, ``max_substep`` or ``defaults`` do not depend on the config, a system gives them
+    as plain class attributes.
     """
 
     name: ClassVar[str]
@@ -105,6 +113,71 @@ class System(abc.ABC):
             )
 
 
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """``fn(params, x)`` with its parameters fixed: one analytic part of a system as a function
+    of the state alone.
+
+    Equal, and hashed alike, when ``fn`` is the same function and ``params`` are equal, as the
+    static fields of the blocks that hold it must be: systems with equal configs build equal
+    models, which share compiled code.
+    """
+
+    fn: Callable[[Any, State], Any]
+    params: Any
+
+    def __call__(self, x: State) -> Any:
+        return self.fn(self.params, x)
+
+
+def analytic_model(
+    config: Any, *, energy: Any, entropy: Any, poisson: Any, friction: Any
+) -> GenericModel:
+    """The :class:`~metriplex.GenericModel` of a system's analytic parts.
+
+    Each part is a structure block (``SumOf((2,))``, ``CanonicalPoisson(3, 1)``,
+    ``KnownPoisson(fn)``, ...), used as it is, or a function ``fn(config, x)``, which becomes
+    its family's known block (:class:`~metriplex.structure.Known`,
+    :class:`~metriplex.structure.KnownPoisson`, :class:`~metriplex.structure.KnownFriction`)
+    around ``Bound(fn, config)``.
+    """
+
+    def block(part: Any, known: type) -> Any:
+        return part if isinstance(part, eqx.Module) else known(Bound(part, config))
+
+    return GenericModel(
+        energy=block(energy, Known),
+        entropy=block(entropy, Known),
+        poisson=block(poisson, KnownPoisson),
+        friction=block(friction, KnownFriction),
+    )
+
+
+class BoxSampling:
+    """Initial states uniform in the config's box, ``x0_center + U(-1, 1) * x0_halfwidth`` per
+    component (a mixin of :class:`System`)."""
+
+    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num n"]:
+        """``x0_center + U(-1, 1) * x0_halfwidth`` per component (see the config)."""
+        self._check_num(num)
+        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+
+
+class BallSampling:
+    """Initial states uniform by volume in the ball :math:`|x - c| \\le r` of the config's
+    ``center`` and ``radius`` (a mixin of :class:`System`)."""
+
+    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num n"]:
+        """Uniform by volume in the ball :math:`|x - c| \\le r` (``config.radius``, ``center``)."""
+        self._check_num(num)
+        center = np.asarray(self.config.center, dtype=np.float64)
+        rng = np.random.default_rng(seed)
+        direction = rng.normal(size=(num, center.shape[0]))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        r = self.config.radius * rng.uniform(size=(num, 1)) ** (1.0 / center.shape[0])
+        return center[None, :] + r * direction
+
+
 def _format(v: Any) -> str:
     if isinstance(v, tuple):
         return "(" + ", ".join(_format(u) for u in v) + ")"
@@ -117,7 +190,13 @@ def _sample_box(
     center: tuple[float, ...], halfwidth: tuple[float, ...], num: int, seed: int
 ) -> np.ndarray:
     """``center + U(-1, 1) * halfwidth`` per component, shape ``(num, n)``."""
-    rng = np.random.default_rng(seed)
+    return _uniform_box(np.random.default_rng(seed), center, halfwidth, num)
+
+
+def _uniform_box(
+    rng: np.random.Generator, center: Any, halfwidth: Any, num: int
+) -> np.ndarray:
+    """:func:`_sample_box` with a given generator (for samplers that draw more after it)."""
     c = np.asarray(center, dtype=np.float64)
     h = np.asarray(halfwidth, dtype=np.float64)
     return c[None, :] + rng.uniform(-1.0, 1.0, size=(num, c.shape[0])) * h[None, :]

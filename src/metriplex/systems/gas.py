@@ -21,14 +21,13 @@ from __future__ import annotations
 import dataclasses
 
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from .._errors import MetriplexError
 from .._model import GenericModel
 from .._types import Matrix, Scalar, State
-from ..structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from ._base import Settings, System, _sample_box
+from ..structure import CanonicalPoisson, SumOf
+from ._base import BoxSampling, Settings, System, analytic_model
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,27 +67,19 @@ def _gas_energies(c: GasConfig, x: State) -> Float[Array, " 2"]:
     return jnp.exp((2.0 / 3.0) * (x[2:4] - jnp.log(c.c_hat * volumes)))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: GasConfig
-
-    def __call__(self, x: State) -> Scalar:
-        return x[1] ** 2 / (2.0 * self.config.mass) + jnp.sum(_gas_energies(self.config, x))
+def _energy(c: GasConfig, x: State) -> Scalar:
+    return x[1] ** 2 / (2.0 * c.mass) + jnp.sum(_gas_energies(c, x))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: GasConfig
-
-    def __call__(self, x: State) -> Matrix:
-        T = (2.0 / 3.0) * _gas_energies(self.config, x)
-        u = jnp.stack([1.0 / T[0], -1.0 / T[1]])
-        block = self.config.alpha * (u[:, None] * u[None, :])
-        return jnp.zeros((4, 4), x.dtype).at[2:, 2:].set(block)
+def _friction(c: GasConfig, x: State) -> Matrix:
+    T = (2.0 / 3.0) * _gas_energies(c, x)
+    u = jnp.stack([1.0 / T[0], -1.0 / T[1]])
+    block = c.alpha * (u[:, None] * u[None, :])
+    return jnp.zeros((4, 4), x.dtype).at[2:, 2:].set(block)
 
 
 @dataclasses.dataclass(frozen=True)
-class GasContainers(System):
+class GasContainers(BoxSampling, System):
     """Two gas containers exchanging heat through a moving piston (a shared GENERIC benchmark).
 
     Published settings: 100 trajectories on :math:`t\\in[0, 8]` with :math:`\\Delta t = 0.02`
@@ -100,29 +91,11 @@ class GasContainers(System):
         "Piston between two ideal-gas containers exchanging heat: canonical L in (q, p), "
         "S = S1 + S2."
     )
+    names = ("q", "p", "S1", "S2")
+    max_substep = 0.002
+    defaults = Settings(0.02, 400, 100, "100 trajectories on t in [0, 8]; first 80 train")
     config: GasConfig = GasConfig()
 
-    @property
-    def max_substep(self) -> float:
-        return 0.002
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("q", "p", "S1", "S2")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((2, 3)),
-            poisson=CanonicalPoisson(4, 1),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(0.02, 400, 100, "100 trajectories on t in [0, 8]; first 80 train")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 4"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component (see :class:`GasConfig`)."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((2, 3)),
+                              poisson=CanonicalPoisson(4, 1), friction=_friction)

@@ -25,14 +25,13 @@ import functools
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import MetriplexError
 from .._model import GenericModel
 from .._types import Matrix, Scalar, State
-from ..structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from ._base import Settings, System, _sample_box
+from ..structure import CanonicalPoisson, SumOf
+from ._base import BoxSampling, Settings, System, analytic_model
 
 _UNIT_X0 = (1.0, 0.0, 2.2, 0.0, 0.0, 2.0, 1.0, 0.0, 1.0, 0.2)
 _SPNN_X0 = (2.2, 0.0, 3.3, 0.0, 0.0, 0.5, 0.5, 0.0, 0.01, -0.01)
@@ -163,31 +162,27 @@ def _strain_gradient(q: Float[Array, " 4"]) -> Float[Array, "2 4"]:
     return jnp.stack([jnp.concatenate([g1, z]), jnp.concatenate([-g2, g2])])
 
 
+def _energy(c: PendulumConfig, x: State, a: Float[Array, " 2"], heat) -> Scalar:
+    """:math:`E` of a state with log-strains ``a`` whose springs hold the heat energies
+    ``heat`` (relative to :math:`\\theta_{\\rm ref}`), in either view."""
+    C, beta = _arr(c.stiffness, x), _arr(c.beta, x)
+    return _kinetic(c, x[4:8]) + jnp.sum(0.5 * C * a**2 + beta * c.theta_ref * a + heat)
+
+
 # -- (q, p, s) ----------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class _EnergyS:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        a = _strains(c, x[0:4])
-        C, beta, c0 = _arr(c.stiffness, x), _arr(c.beta, x), _arr(c.heat_capacity, x)
-        thermal = c0 * c.theta_ref * jnp.expm1((x[8:10] - beta * a) / c0)
-        return _kinetic(c, x[4:8]) + jnp.sum(0.5 * C * a**2 + beta * c.theta_ref * a + thermal)
+def _energy_s(c: PendulumConfig, x: State) -> Scalar:
+    a = _strains(c, x[0:4])
+    beta, c0 = _arr(c.beta, x), _arr(c.heat_capacity, x)
+    return _energy(c, x, a, c0 * c.theta_ref * jnp.expm1((x[8:10] - beta * a) / c0))
 
 
-@dataclasses.dataclass(frozen=True)
-class _FrictionS:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Matrix:
-        th = _temperatures(self.config, x)
-        k = self.config.kappa
-        one = jnp.ones((), x.dtype)
-        block = k * jnp.stack(
-            [jnp.stack([th[1] / th[0], -one]), jnp.stack([-one, th[0] / th[1]])]
-        )
-        return jnp.zeros((10, 10), x.dtype).at[8:, 8:].set(block)
+def _friction_s(c: PendulumConfig, x: State) -> Matrix:
+    th = _temperatures(c, x)
+    one = jnp.ones((), x.dtype)
+    block = c.kappa * jnp.stack(
+        [jnp.stack([th[1] / th[0], -one]), jnp.stack([-one, th[0] / th[1]])]
+    )
+    return jnp.zeros((10, 10), x.dtype).at[8:, 8:].set(block)
 
 
 def entropy_to_temperature(
@@ -213,9 +208,15 @@ def _to_temperature(config: PendulumConfig, y: State) -> State:
 
 
 def _to_entropy(config: PendulumConfig, y: State) -> State:
-    a = _strains(config, y[0:4])
-    beta, c0 = _arr(config.beta, y), _arr(config.heat_capacity, y)
-    return jnp.concatenate([y[0:8], beta * a + c0 * jnp.log(y[8:10] / config.theta_ref)])
+    return jnp.concatenate([y[0:8], _entropies(config, y)])
+
+
+def _entropies(c: PendulumConfig, y: State) -> Float[Array, " 2"]:
+    r""":math:`s_i = \beta_i a_i + c_{0i}\log(\theta_i/\theta_{\rm ref})` of a state
+    :math:`(q, p, \theta)`."""
+    a = _strains(c, y[0:4])
+    beta, c0 = _arr(c.beta, y), _arr(c.heat_capacity, y)
+    return beta * a + c0 * jnp.log(y[8:10] / c.theta_ref)
 
 
 @functools.partial(jax.jit, static_argnums=(0, 1))
@@ -227,7 +228,7 @@ _Q_P_NAMES = ("q1x", "q1y", "q2x", "q2y", "p1x", "p1y", "p2x", "p2y")
 
 
 @dataclasses.dataclass(frozen=True)
-class _Pendulum(System):
+class _Pendulum(BoxSampling, System):
     """What both views of the pendulum share: the config, named sets and sampling in s."""
 
     config: PendulumConfig = PendulumConfig()
@@ -255,10 +256,6 @@ class _Pendulum(System):
             base = type(self)(PendulumConfig.named(str(params.pop("parameter_set"))))
         return System.with_params(base, **params)
 
-    def _sample_entropy_states(self, num: int, seed: int) -> np.ndarray:
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
-
 
 @dataclasses.dataclass(frozen=True)
 class PendulumEnergetic(_Pendulum):
@@ -282,21 +279,11 @@ class PendulumEnergetic(_Pendulum):
         "Fourier heat conduction between the springs."
     )
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return _Q_P_NAMES + ("s1", "s2")
+    names = _Q_P_NAMES + ("s1", "s2")
 
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_EnergyS(self.config)),
-            entropy=SumOf((8, 9)),
-            poisson=CanonicalPoisson(10, 4),
-            friction=KnownFriction(_FrictionS(self.config)),
-        )
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 10"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component (see :class:`PendulumConfig`)."""
-        return self._sample_entropy_states(num, seed)
+        return analytic_model(self.config, energy=_energy_s, entropy=SumOf((8, 9)),
+                              poisson=CanonicalPoisson(10, 4), friction=_friction_s)
 
     def temperatures(self, x: Float[ArrayLike, "*batch 10"]) -> Float[Array, "*batch 2"]:
         r""":math:`\theta_i = \partial E/\partial s_i` of states ``x``."""

@@ -13,14 +13,14 @@ from jaxtyping import Array, ArrayLike, Float
 
 from .._model import GenericModel
 from .._types import Matrix, Scalar, State
-from ..structure import Known, KnownFriction, KnownPoisson
-from ._base import Settings
+from ._base import Settings, analytic_model
 from .pendulum import (
     _Q_P_NAMES,
     PendulumConfig,
     PendulumEnergetic,
     _arr,
-    _kinetic,
+    _energy,
+    _entropies,
     _Pendulum,
     _strain_gradient,
     _strains,
@@ -29,54 +29,29 @@ from .pendulum import (
 )
 
 
-@dataclasses.dataclass(frozen=True)
-class _EnergyT:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        a = _strains(c, x[0:4])
-        C, beta, c0 = _arr(c.stiffness, x), _arr(c.beta, x), _arr(c.heat_capacity, x)
-        thermal = c0 * (x[8:10] - c.theta_ref)
-        return _kinetic(c, x[4:8]) + jnp.sum(0.5 * C * a**2 + beta * c.theta_ref * a + thermal)
+def _energy_t(c: PendulumConfig, x: State) -> Scalar:
+    return _energy(c, x, _strains(c, x[0:4]), _arr(c.heat_capacity, x) * (x[8:10] - c.theta_ref))
 
 
-@dataclasses.dataclass(frozen=True)
-class _EntropyT:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        a = _strains(c, x[0:4])
-        beta, c0 = _arr(c.beta, x), _arr(c.heat_capacity, x)
-        return jnp.sum(beta * a + c0 * jnp.log(x[8:10] / c.theta_ref))
+def _entropy_t(c: PendulumConfig, x: State) -> Scalar:
+    return jnp.sum(_entropies(c, x))
 
 
-@dataclasses.dataclass(frozen=True)
-class _PoissonT:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        beta, c0 = _arr(c.beta, x), _arr(c.heat_capacity, x)
-        # G = d theta / d q at fixed s, written in the observed theta.
-        G = -(beta * x[8:10] / c0)[:, None] * _strain_gradient(x[0:4])
-        eye = jnp.eye(4, dtype=x.dtype)
-        L = jnp.zeros((10, 10), x.dtype)
-        L = L.at[0:4, 4:8].set(eye).at[4:8, 0:4].set(-eye)
-        return L.at[4:8, 8:10].set(-G.T).at[8:10, 4:8].set(G)
+def _poisson_t(c: PendulumConfig, x: State) -> Matrix:
+    beta, c0 = _arr(c.beta, x), _arr(c.heat_capacity, x)
+    # G = d theta / d q at fixed s, written in the observed theta.
+    G = -(beta * x[8:10] / c0)[:, None] * _strain_gradient(x[0:4])
+    eye = jnp.eye(4, dtype=x.dtype)
+    L = jnp.zeros((10, 10), x.dtype)
+    L = L.at[0:4, 4:8].set(eye).at[4:8, 0:4].set(-eye)
+    return L.at[4:8, 8:10].set(-G.T).at[8:10, 4:8].set(G)
 
 
-@dataclasses.dataclass(frozen=True)
-class _FrictionT:
-    config: PendulumConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        c0 = _arr(c.heat_capacity, x)
-        v = jnp.stack([1.0 / c0[0], -1.0 / c0[1]])
-        block = (c.kappa * x[8] * x[9]) * (v[:, None] * v[None, :])
-        return jnp.zeros((10, 10), x.dtype).at[8:, 8:].set(block)
+def _friction_t(c: PendulumConfig, x: State) -> Matrix:
+    c0 = _arr(c.heat_capacity, x)
+    v = jnp.stack([1.0 / c0[0], -1.0 / c0[1]])
+    block = (c.kappa * x[8] * x[9]) * (v[:, None] * v[None, :])
+    return jnp.zeros((10, 10), x.dtype).at[8:, 8:].set(block)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -106,9 +81,7 @@ class PendulumTemperature(_Pendulum):
         "M' = J M J^T, E' linear in theta; x0_* are given in (q, p, s)."
     )
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return _Q_P_NAMES + ("theta1", "theta2")
+    names = _Q_P_NAMES + ("theta1", "theta2")
 
     @property
     def defaults(self) -> Settings:
@@ -119,13 +92,8 @@ class PendulumTemperature(_Pendulum):
         )
 
     def _build_model(self) -> GenericModel:
-        c = self.config
-        return GenericModel(
-            energy=Known(_EnergyT(c)),
-            entropy=Known(_EntropyT(c)),
-            poisson=KnownPoisson(_PoissonT(c)),
-            friction=KnownFriction(_FrictionT(c)),
-        )
+        return analytic_model(self.config, energy=_energy_t, entropy=_entropy_t,
+                              poisson=_poisson_t, friction=_friction_t)
 
     @property
     def energetic(self) -> PendulumEnergetic:
@@ -134,7 +102,7 @@ class PendulumTemperature(_Pendulum):
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 10"]:
         """Drawn in :math:`(q, p, s)` like :class:`PendulumEnergetic`, then mapped to θ."""
-        x = self._sample_entropy_states(num, seed)
+        x = self.energetic.sample_initial(num, seed=seed)
         c = self.config
         q1, d = x[:, 0:2], x[:, 2:4] - x[:, 0:2]
         lengths = np.stack([np.linalg.norm(q1, axis=1), np.linalg.norm(d, axis=1)], axis=1)

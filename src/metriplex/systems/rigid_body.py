@@ -16,13 +16,12 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
 
 from .._errors import MetriplexError
 from .._model import GenericModel
 from .._types import Matrix, Scalar, State
-from ..structure import Known, KnownPoisson, ZeroFriction, ZeroPotential
-from ._base import Settings, System
+from ..structure import KnownPoisson, ZeroFriction, ZeroPotential
+from ._base import BallSampling, Settings, System, analytic_model
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,13 +51,11 @@ class RigidBodyConfig:
             )
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    inertia: tuple[float, float, float]
-
-    def __call__(self, x: State) -> Scalar:
-        inv = 1.0 / jnp.asarray(self.inertia, dtype=x.dtype)
-        return 0.5 * jnp.sum(x**2 * inv)
+def _rotational_energy(c: RigidBodyConfig, m: State) -> Scalar:
+    r""":math:`\tfrac12\sum_i m_i^2/I_i` with the config's ``inertia`` (also of the zoo's
+    rotating bodies)."""
+    inv = 1.0 / jnp.asarray(c.inertia, dtype=m.dtype)
+    return 0.5 * jnp.sum(m**2 * inv)
 
 
 def _lie_poisson(x: State) -> Matrix:
@@ -70,7 +67,7 @@ def _lie_poisson(x: State) -> Matrix:
 
 
 @dataclasses.dataclass(frozen=True)
-class RigidBody(System):
+class RigidBody(BallSampling, System):
     r"""The free rigid body (learn :math:`L` and :math:`E`).
 
     ```python
@@ -87,6 +84,10 @@ class RigidBody(System):
         "Free rigid body (Euler's equations): Lie-Poisson L(m) = -eps m, "
         "E = sum m_i^2/(2 I_i), S = 0, M = 0."
     )
+    names = ("m1", "m2", "m3")
+    defaults = Settings(
+        2.0 * np.pi / 100.0, 10_000, 5, "5 trajectories x 10 000 steps (seed paper)"
+    )
     config: RigidBodyConfig = RigidBodyConfig()
 
     @property
@@ -97,29 +98,6 @@ class RigidBody(System):
         )
         return min(0.02, 0.001 / speed)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("m1", "m2", "m3")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config.inertia)),
-            entropy=ZeroPotential(),
-            poisson=KnownPoisson(_lie_poisson),
-            friction=ZeroFriction(3),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(
-            2.0 * np.pi / 100.0, 10_000, 5, "5 trajectories x 10 000 steps (seed paper)"
-        )
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 3"]:
-        """Uniform by volume in the ball :math:`|m - c| \\le r` (``config.radius``, ``center``)."""
-        self._check_num(num)
-        rng = np.random.default_rng(seed)
-        direction = rng.normal(size=(num, 3))
-        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-        r = self.config.radius * rng.uniform(size=(num, 1)) ** (1.0 / 3.0)
-        return np.asarray(self.config.center, dtype=np.float64)[None, :] + r * direction
+        return analytic_model(self.config, energy=_rotational_energy, entropy=ZeroPotential(),
+                              poisson=KnownPoisson(_lie_poisson), friction=ZeroFriction(3))

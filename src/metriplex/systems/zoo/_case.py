@@ -1,12 +1,13 @@
 """What a zoo case is: a ground-truth system, how much data its user would have, and the
-structure options that describe what that user knows."""
+structure options that describe what that user knows; the data are the system's own
+``defaults`` (:func:`case_settings`)."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Mapping
+from typing import Any, Mapping
 
-from .._base import System
+from .._base import Settings, System
 
 
 @dataclasses.dataclass(frozen=True)
@@ -33,6 +34,13 @@ class ZooCase:
     held_out: bool = False
     note: str = ""
 
+    @classmethod
+    def of(cls, system: System, flags: Mapping[str, str], **options: Any) -> "ZooCase":
+        """The case of ``system``: its ``defaults`` give ``trajectories``, ``steps`` and ``dt``;
+        ``options`` are the other fields."""
+        d = system.defaults
+        return cls(system, flags, d.trajectories, d.steps, d.dt, **options)
+
     @property
     def name(self) -> str:
         return self.system.name
@@ -40,3 +48,9 @@ class ZooCase:
     @property
     def horizon_steps(self) -> int:
         return self.steps if self.test_steps is None else self.test_steps
+
+
+def case_settings(dt: float, steps: int, trajectories: int) -> Settings:
+    """A zoo system's ``defaults``: the data of its case, ``steps`` steps of size ``dt`` per
+    trajectory (our choice, not a published experiment)."""
+    return Settings(dt, steps, trajectories, "zoo case (our choice)")

@@ -39,9 +39,10 @@ from jaxtyping import Float
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import Known, KnownFriction, KnownPoisson, SumOf
-from .._base import Settings, System
-from ._case import ZooCase
+from ...structure import SumOf
+from .._base import System, _sample_box, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import bath_energy, bath_temperature, heating_friction
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,47 +109,27 @@ def magnetic_field(c: ChargedParticleConfig, x: State) -> State:
     )
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: ChargedParticleConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        xi = x[:3] - jnp.asarray([0.0, 0.0, c.z0], x.dtype)
-        kinetic = jnp.sum(x[3:6] ** 2) / (2.0 * c.mass)
-        trap = 0.5 * c.stiffness * jnp.sum(xi**2)
-        heat = c.heat_capacity * c.theta0 * jnp.expm1(x[6] / c.heat_capacity)
-        return kinetic + trap + heat
+def _energy(c: ChargedParticleConfig, x: State) -> Scalar:
+    xi = x[:3] - jnp.asarray([0.0, 0.0, c.z0], x.dtype)
+    kinetic = jnp.sum(x[3:6] ** 2) / (2.0 * c.mass)
+    trap = 0.5 * c.stiffness * jnp.sum(xi**2)
+    return kinetic + trap + bath_energy(x[6], c.heat_capacity, c.theta0)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Poisson:
-    config: ChargedParticleConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        bx, by, bz = c.charge * magnetic_field(c, x)
-        z = jnp.zeros((), x.dtype)
-        # -e B^ with B^ v = B x v.
-        gyro = jnp.stack([jnp.stack([z, bz, -by]), jnp.stack([-bz, z, bx]),
-                          jnp.stack([by, -bx, z])])
-        eye = jnp.eye(3, dtype=x.dtype)
-        out = jnp.zeros((7, 7), x.dtype)
-        return out.at[0:3, 3:6].set(eye).at[3:6, 0:3].set(-eye).at[3:6, 3:6].set(gyro)
+def _poisson(c: ChargedParticleConfig, x: State) -> Matrix:
+    bx, by, bz = c.charge * magnetic_field(c, x)
+    z = jnp.zeros((), x.dtype)
+    # -e B^ with B^ v = B x v.
+    gyro = jnp.stack([jnp.stack([z, bz, -by]), jnp.stack([-bz, z, bx]),
+                      jnp.stack([by, -bx, z])])
+    eye = jnp.eye(3, dtype=x.dtype)
+    out = jnp.zeros((7, 7), x.dtype)
+    return out.at[0:3, 3:6].set(eye).at[3:6, 0:3].set(-eye).at[3:6, 3:6].set(gyro)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: ChargedParticleConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        v = x[3:6] / c.mass
-        theta = c.theta0 * jnp.exp(x[6] / c.heat_capacity)
-        W = jnp.concatenate(
-            [jnp.zeros((3, 3), x.dtype), theta * jnp.eye(3, dtype=x.dtype), -v[None, :]]
-        )
-        return (c.drag / theta) * (W @ W.T)
+def _friction(c: ChargedParticleConfig, x: State) -> Matrix:
+    theta = bath_temperature(x[6], c.heat_capacity, c.theta0)
+    return heating_friction(c.drag, theta, x[3:6] / c.mass)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -160,49 +141,26 @@ class ChargedParticle(System):
         "Charged particle in a harmonic trap (centre z0 = 1e4) and a divergence-free mirror "
         "field, with drag heating the medium: non-canonical L with -e B^(x), S = s."
     )
+    names = ("x", "y", "z", "px", "py", "pz", "s")
+    max_substep = 0.005
+    defaults = case_settings(dt=0.035, steps=300, trajectories=32)
     config: ChargedParticleConfig = ChargedParticleConfig()
 
-    @property
-    def max_substep(self) -> float:
-        return 0.005
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("x", "y", "z", "px", "py", "pz", "s")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((6,)),
-            poisson=KnownPoisson(_Poisson(self.config)),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((6,)),
+                              poisson=_poisson, friction=_friction)
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 7"]:
         """Uniform in a box around the trap centre (see :class:`ChargedParticleConfig`)."""
         self._check_num(num)
         c = self.config
-        rng = np.random.default_rng(seed)
-        half = np.array([c.position_halfwidth] * 3 + [c.momentum_halfwidth] * 3
-                        + [c.entropy_halfwidth])
-        center = np.array([0.0, 0.0, c.z0, 0.0, 0.0, 0.0, 0.0])
-        return center[None, :] + rng.uniform(-1.0, 1.0, size=(num, 7)) * half[None, :]
+        half = [c.position_halfwidth] * 3 + [c.momentum_halfwidth] * 3 + [c.entropy_halfwidth]
+        return _sample_box((0.0, 0.0, c.z0, 0.0, 0.0, 0.0, 0.0), half, num, seed)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.035, 300, 32
-
-CASE = ZooCase(
-    system=ChargedParticle(),
-    flags={"entropy": "sum:6"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
-    time_unit="s",
-    test_trajectories=10,
+CASE = ZooCase.of(
+    ChargedParticle(),
+    {"entropy": "sum:6"},
     held_out=False,
     note="Non-canonical state-dependent L (Jacobi via div B = 0) learned, with a 1e4 offset in z.",
 )

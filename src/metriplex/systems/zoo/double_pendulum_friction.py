@@ -31,14 +31,14 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
 
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from .._base import Settings, System, _sample_box
-from ._case import ZooCase
+from ...structure import CanonicalPoisson, SumOf
+from .._base import BoxSampling, System, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import bath_energy, bath_temperature, heating_factor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,44 +94,29 @@ def _velocities(c: DoublePendulumFrictionConfig, x: State) -> State:
     return jnp.stack([d * x[2] - b * x[3], a * x[3] - b * x[2]]) / det
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: DoublePendulumFrictionConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        (m1, m2), (l1, l2) = c.masses, c.lengths
-        a, b, d, det = _inverse_mass(c, x)
-        p1, p2 = x[2], x[3]
-        kinetic = (d * p1**2 - 2.0 * b * p1 * p2 + a * p2**2) / (2.0 * det)
-        potential = c.gravity * (
-            (m1 + m2) * l1 * (1.0 - jnp.cos(x[0])) + m2 * l2 * (1.0 - jnp.cos(x[1]))
-        )
-        heat = c.heat_capacity * c.theta0 * jnp.expm1(x[4] / c.heat_capacity)
-        return kinetic + potential + heat
+def _energy(c: DoublePendulumFrictionConfig, x: State) -> Scalar:
+    (m1, m2), (l1, l2) = c.masses, c.lengths
+    a, b, d, det = _inverse_mass(c, x)
+    p1, p2 = x[2], x[3]
+    kinetic = (d * p1**2 - 2.0 * b * p1 * p2 + a * p2**2) / (2.0 * det)
+    potential = c.gravity * (
+        (m1 + m2) * l1 * (1.0 - jnp.cos(x[0])) + m2 * l2 * (1.0 - jnp.cos(x[1]))
+    )
+    return kinetic + potential + bath_energy(x[4], c.heat_capacity, c.theta0)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: DoublePendulumFrictionConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        # Gamma = B B^T with B = A^T diag(sqrt(gamma)): one column per joint, so that
-        # M = G G^T / theta with G = W B is a Gram matrix (exactly symmetric, PSD).
-        r1, r2 = np.sqrt(c.friction)
-        B = jnp.asarray([[r1, -r2], [0.0, r2]], x.dtype)
-        omega = _velocities(c, x)
-        theta = c.theta0 * jnp.exp(x[4] / c.heat_capacity)
-        W = jnp.concatenate(
-            [jnp.zeros((2, 2), x.dtype), theta * jnp.eye(2, dtype=x.dtype), -omega[None, :]]
-        )
-        G = W @ B
-        return (G @ G.T) / theta
+def _friction(c: DoublePendulumFrictionConfig, x: State) -> Matrix:
+    # Gamma = B B^T with B = A^T diag(sqrt(gamma)): one column per joint, so that
+    # M = G G^T / theta with G = W B is a Gram matrix (exactly symmetric, PSD).
+    r1, r2 = np.sqrt(c.friction)
+    B = jnp.asarray([[r1, -r2], [0.0, r2]], x.dtype)
+    theta = bath_temperature(x[4], c.heat_capacity, c.theta0)
+    G = heating_factor(theta, _velocities(c, x)) @ B
+    return (G @ G.T) / theta
 
 
 @dataclasses.dataclass(frozen=True)
-class DoublePendulumFriction(System):
+class DoublePendulumFriction(BoxSampling, System):
     """A rigid double pendulum under gravity; friction at both joints heats one reservoir."""
 
     name = "double-pendulum-friction"
@@ -139,44 +124,19 @@ class DoublePendulumFriction(System):
         "Rigid planar double pendulum under gravity with joint friction heating one reservoir: "
         "canonical L in (phi, p), S = s, M = W Gamma W^T / theta."
     )
+    names = ("phi1", "phi2", "p1", "p2", "s")
+    max_substep = 0.002
+    defaults = case_settings(dt=0.012, steps=300, trajectories=32)
     config: DoublePendulumFrictionConfig = DoublePendulumFrictionConfig()
 
-    @property
-    def max_substep(self) -> float:
-        return 0.002
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("phi1", "phi2", "p1", "p2", "s")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((4,)),
-            poisson=CanonicalPoisson(5, 2),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 5"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((4,)),
+                              poisson=CanonicalPoisson(5, 2), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.012, 300, 32
-
-CASE = ZooCase(
-    system=DoublePendulumFriction(),
-    flags={"poisson": "canonical:2", "entropy": "sum:4"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
-    time_unit="s",
-    test_trajectories=10,
+CASE = ZooCase.of(
+    DoublePendulumFriction(),
+    {"poisson": "canonical:2", "entropy": "sum:4"},
     held_out=True,
     note="Position-dependent mass matrix, two coupled modes and a state-dependent friction matrix.",
 )

@@ -28,15 +28,13 @@ from __future__ import annotations
 import dataclasses
 
 import jax.numpy as jnp
-import numpy as np
-from jaxtyping import Float
 
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import Known, KnownFriction, SumOf, ZeroPoisson
-from .._base import Settings, System, _sample_box
-from ._case import ZooCase
+from ...structure import SumOf, ZeroPoisson
+from .._base import BoxSampling, System, analytic_model
+from ._case import ZooCase, case_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,28 +85,20 @@ def temperatures(config: HeatExchangeConfig, x: State) -> State:
     return config.temperature * jnp.exp((x - s0) / C)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: HeatExchangeConfig
-
-    def __call__(self, x: State) -> Scalar:
-        C = jnp.asarray(self.config.heat_capacity, dtype=x.dtype)
-        return jnp.sum(C * temperatures(self.config, x))
+def _energy(c: HeatExchangeConfig, x: State) -> Scalar:
+    C = jnp.asarray(c.heat_capacity, dtype=x.dtype)
+    return jnp.sum(C * temperatures(c, x))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: HeatExchangeConfig
-
-    def __call__(self, x: State) -> Matrix:
-        T = temperatures(self.config, x)
-        # kappa T1 T2 w w^T with w = (1/T1, -1/T2), written without the divisions.
-        u = jnp.stack([T[1], -T[0]])
-        return (self.config.kappa / (T[0] * T[1])) * (u[:, None] * u[None, :])
+def _friction(c: HeatExchangeConfig, x: State) -> Matrix:
+    T = temperatures(c, x)
+    # kappa T1 T2 w w^T with w = (1/T1, -1/T2), written without the divisions.
+    u = jnp.stack([T[1], -T[0]])
+    return (c.kappa / (T[0] * T[1])) * (u[:, None] * u[None, :])
 
 
 @dataclasses.dataclass(frozen=True)
-class HeatExchange(System):
+class HeatExchange(BoxSampling, System):
     """Two bodies exchanging heat (n = 2): no reversible part, large entropy offsets, hours."""
 
     name = "heat-exchange"
@@ -117,6 +107,8 @@ class HeatExchange(System):
         "E = sum C_i T0 exp((s_i - s0_i)/C_i), S = s1 + s2, M = kappa T1 T2 w w^T, "
         "w = (1/T1, -1/T2)."
     )
+    names = ("s1", "s2")
+    defaults = case_settings(dt=0.05, steps=200, trajectories=24)
     config: HeatExchangeConfig = HeatExchangeConfig()
 
     @property
@@ -124,38 +116,15 @@ class HeatExchange(System):
         # The fastest rate is ~ 1/tau (times the temperature ratio, within e^±4 by validation).
         return min(0.01, 0.005 * self.config.relaxation_time)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("s1", "s2")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((0, 1)),
-            poisson=ZeroPoisson(2),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 2"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((0, 1)),
+                              poisson=ZeroPoisson(2), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.05, 200, 24
-
-CASE = ZooCase(
-    system=HeatExchange(),
-    flags={"poisson": "zero", "entropy": "sum:0,1"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
+CASE = ZooCase.of(
+    HeatExchange(),
+    {"poisson": "zero", "entropy": "sum:0,1"},
     time_unit="h",
-    test_trajectories=10,
     held_out=True,
     note="Pure dissipation with L = 0 on states ~1e4 that move by tens: offsets and scaling.",
 )

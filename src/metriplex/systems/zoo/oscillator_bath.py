@@ -19,16 +19,19 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
-import numpy as np
-from jaxtyping import Float
-
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from .._base import Settings, System, _sample_box
-from ._case import ZooCase
+from ...structure import CanonicalPoisson, SumOf
+from .._base import BoxSampling, System, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import (
+    bath_energy,
+    bath_temperature,
+    hardening_frequency,
+    heating_friction,
+    oscillator_energy,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,36 +66,17 @@ class OscillatorBathConfig:
             )
 
 
-def bath_energy(s, heat_capacity: float, theta0: float):
-    r""":math:`U(s) = c\,\theta_0(e^{s/c} - 1)`, whose derivative is :math:`\theta_0 e^{s/c}`."""
-    return heat_capacity * theta0 * jnp.expm1(s / heat_capacity)
+def _energy(c: OscillatorBathConfig, x: State) -> Scalar:
+    return oscillator_energy(c, x[0], x[1]) + bath_energy(x[2], c.heat_capacity, c.theta0)
+
+
+def _friction(c: OscillatorBathConfig, x: State) -> Matrix:
+    theta = bath_temperature(x[2], c.heat_capacity, c.theta0)
+    return heating_friction(c.damping, theta, x[1:2] / c.mass)
 
 
 @dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: OscillatorBathConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        q, p, s = x[0], x[1], x[2]
-        mechanical = p**2 / (2.0 * c.mass) + 0.5 * c.stiffness * q**2 + 0.25 * c.quartic * q**4
-        return mechanical + bath_energy(s, c.heat_capacity, c.theta0)
-
-
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: OscillatorBathConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        v = x[1] / c.mass
-        theta = c.theta0 * jnp.exp(x[2] / c.heat_capacity)
-        w = jnp.stack([jnp.zeros((), x.dtype), theta, -v])
-        return (c.damping / theta) * (w[:, None] * w[None, :])
-
-
-@dataclasses.dataclass(frozen=True)
-class OscillatorBath(System):
+class OscillatorBath(BoxSampling, System):
     """A hardening Duffing oscillator with viscous friction that heats one bath (n = 3)."""
 
     name = "oscillator-bath"
@@ -100,47 +84,24 @@ class OscillatorBath(System):
         "Duffing oscillator (k q^2/2 + a q^4/4) with friction heating a bath: canonical L in "
         "(q, p), S = s, M = (gamma/theta) w w^T with w = (0, theta, -v)."
     )
+    names = ("q", "p", "s")
+    defaults = case_settings(dt=0.022, steps=300, trajectories=32)
     config: OscillatorBathConfig = OscillatorBathConfig()
 
     @property
     def max_substep(self) -> float:
         c = self.config
-        q = abs(c.x0_center[0]) + abs(c.x0_halfwidth[0])
-        omega = np.sqrt((c.stiffness + 3.0 * c.quartic * q**2) / c.mass)
+        omega = hardening_frequency(c.stiffness, c.quartic, c.mass, c.x0_center, c.x0_halfwidth)
         return float(min(0.005, 0.01 / omega))
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("q", "p", "s")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((2,)),
-            poisson=CanonicalPoisson(3, 1),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 3"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((2,)),
+                              poisson=CanonicalPoisson(3, 1), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.022, 300, 32
-
-CASE = ZooCase(
-    system=OscillatorBath(),
-    flags={"poisson": "canonical:1", "entropy": "sum:2"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
-    time_unit="s",
-    test_trajectories=10,
+CASE = ZooCase.of(
+    OscillatorBath(),
+    {"poisson": "canonical:1", "entropy": "sum:2"},
     held_out=False,
     note="Smallest nonlinear dissipative case: amplitude-dependent frequency, one heated bath.",
 )

@@ -29,15 +29,14 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
 
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import Known, KnownFriction, KnownPoisson
-from .._base import Settings, System
-from ..rigid_body import _lie_poisson
-from ._case import ZooCase
+from ...structure import KnownPoisson
+from .._base import BallSampling, System, analytic_model
+from ..rigid_body import _lie_poisson, _rotational_energy
+from ._case import ZooCase, case_settings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -85,36 +84,19 @@ class RelaxingRigidBodyConfig:
             )
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    inertia: tuple[float, float, float]
-
-    def __call__(self, x: State) -> Scalar:
-        inv = 1.0 / jnp.asarray(self.inertia, dtype=x.dtype)
-        return 0.5 * jnp.sum(x**2 * inv)
+def _entropy(c: RelaxingRigidBodyConfig, x: State) -> Scalar:
+    return -0.5 * c.gamma * jnp.sum(x**2)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Entropy:
-    gamma: float
-
-    def __call__(self, x: State) -> Scalar:
-        return -0.5 * self.gamma * jnp.sum(x**2)
+def _friction(c: RelaxingRigidBodyConfig, x: State) -> Matrix:
+    omega = x / jnp.asarray(c.inertia, dtype=x.dtype)
+    norm2 = jnp.sum(omega**2)
+    eye = jnp.eye(3, dtype=x.dtype)
+    return c.kappa * (norm2 * eye - omega[:, None] * omega[None, :])
 
 
 @dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: RelaxingRigidBodyConfig
-
-    def __call__(self, x: State) -> Matrix:
-        omega = x / jnp.asarray(self.config.inertia, dtype=x.dtype)
-        norm2 = jnp.sum(omega**2)
-        eye = jnp.eye(3, dtype=x.dtype)
-        return self.config.kappa * (norm2 * eye - omega[:, None] * omega[None, :])
-
-
-@dataclasses.dataclass(frozen=True)
-class RelaxingRigidBody(System):
+class RelaxingRigidBody(BallSampling, System):
     """Morrison's relaxing rigid body (n = 3): energy kept, Casimir relaxed, nothing known."""
 
     name = "relaxing-rigid-body"
@@ -123,6 +105,8 @@ class RelaxingRigidBody(System):
         "E = sum m_i^2/(2 I_i), S = -gamma |m|^2/2, M = kappa (|Omega|^2 1 - Omega Omega^T), "
         "Omega = I^-1 m."
     )
+    names = ("m1", "m2", "m3")
+    defaults = case_settings(dt=0.05, steps=300, trajectories=32)
     config: RelaxingRigidBodyConfig = RelaxingRigidBodyConfig()
 
     @property
@@ -132,42 +116,14 @@ class RelaxingRigidBody(System):
         speed = (c.radius + float(np.linalg.norm(c.center))) / min(c.inertia)
         return min(0.02, 0.002 / speed)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("m1", "m2", "m3")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config.inertia)),
-            entropy=Known(_Entropy(self.config.gamma)),
-            poisson=KnownPoisson(_lie_poisson),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 3"]:
-        """Uniform by volume in the ball :math:`|m - c| \\le r` (``config.radius``, ``center``)."""
-        self._check_num(num)
-        rng = np.random.default_rng(seed)
-        direction = rng.normal(size=(num, 3))
-        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-        r = self.config.radius * rng.uniform(size=(num, 1)) ** (1.0 / 3.0)
-        return np.asarray(self.config.center, dtype=np.float64)[None, :] + r * direction
+        return analytic_model(self.config, energy=_rotational_energy, entropy=_entropy,
+                              poisson=KnownPoisson(_lie_poisson), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.05, 300, 32
-
-CASE = ZooCase(
-    system=RelaxingRigidBody(),
-    flags={},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
-    time_unit="s",
-    test_trajectories=10,
+CASE = ZooCase.of(
+    RelaxingRigidBody(),
+    {},
     held_out=False,
     note="Nothing known: a non-canonical Lie-Poisson L, a nonlinear entropy and a state-"
     "dependent M that conserves E while the Casimir |m|^2 decays.",

@@ -23,16 +23,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
-import numpy as np
-from jaxtyping import Float
-
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from .._base import Settings, System, _sample_box
-from ._case import ZooCase
+from ...structure import CanonicalPoisson, SumOf
+from .._base import BoxSampling, System, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import bath_energy, bath_temperature, hardening_frequency, heating_friction
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,33 +66,20 @@ class RLCCircuitConfig:
             )
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: RLCCircuitConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        Q, Phi, s = x[0], x[1], x[2]
-        capacitor = Q**2 / (2.0 * c.capacitance) + 0.25 * c.nonlinearity * Q**4
-        inductor = Phi**2 / (2.0 * c.inductance)
-        heat = c.heat_capacity * c.theta0 * jnp.expm1(s / c.heat_capacity)
-        return capacitor + inductor + heat
+def _energy(c: RLCCircuitConfig, x: State) -> Scalar:
+    Q, Phi, s = x[0], x[1], x[2]
+    capacitor = Q**2 / (2.0 * c.capacitance) + 0.25 * c.nonlinearity * Q**4
+    inductor = Phi**2 / (2.0 * c.inductance)
+    return capacitor + inductor + bath_energy(s, c.heat_capacity, c.theta0)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: RLCCircuitConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        current = x[1] / c.inductance
-        theta = c.theta0 * jnp.exp(x[2] / c.heat_capacity)
-        w = jnp.stack([jnp.zeros((), x.dtype), theta, -current])
-        return (c.resistance / theta) * (w[:, None] * w[None, :])
+def _friction(c: RLCCircuitConfig, x: State) -> Matrix:
+    theta = bath_temperature(x[2], c.heat_capacity, c.theta0)
+    return heating_friction(c.resistance, theta, x[1:2] / c.inductance)
 
 
 @dataclasses.dataclass(frozen=True)
-class RLCCircuit(System):
+class RLCCircuit(BoxSampling, System):
     """A series RLC circuit with a stiffening capacitor; the resistor heats a thermal mass."""
 
     name = "rlc-circuit"
@@ -103,47 +87,26 @@ class RLCCircuit(System):
         "Series RLC circuit, capacitor energy Q^2/2C + b Q^4/4, inductor Phi^2/2L; the "
         "resistor heats a thermal mass: canonical L in (Q, Phi), S = s (SI units, ms periods)."
     )
+    names = ("Q", "Phi", "s")
+    defaults = case_settings(dt=3.5e-5, steps=300, trajectories=32)
     config: RLCCircuitConfig = RLCCircuitConfig()
 
     @property
     def max_substep(self) -> float:
         c = self.config
-        Q = abs(c.x0_center[0]) + abs(c.x0_halfwidth[0])
-        omega = np.sqrt((1.0 / c.capacitance + 3.0 * c.nonlinearity * Q**2) / c.inductance)
+        omega = hardening_frequency(1.0 / c.capacitance, c.nonlinearity, c.inductance,
+                                    c.x0_center, c.x0_halfwidth)
         return float(0.01 / omega)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("Q", "Phi", "s")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((2,)),
-            poisson=CanonicalPoisson(3, 1),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 3"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((2,)),
+                              poisson=CanonicalPoisson(3, 1), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 3.5e-5, 300, 32
-
-CASE = ZooCase(
-    system=RLCCircuit(),
-    flags={"poisson": "canonical:1", "entropy": "sum:2"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
+CASE = ZooCase.of(
+    RLCCircuit(),
+    {"poisson": "canonical:1", "entropy": "sum:2"},
     time_unit="s (period ~ms)",
-    test_trajectories=10,
     held_out=True,
     note="Tiny SI scales (Q ~ 1e-3 C, s ~ 1e-6 J/K, t ~ 1e-2 s, theta ~ 300 K) in one model.",
 )

@@ -33,15 +33,15 @@ import dataclasses
 
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Float
 
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import Known, KnownFriction, KnownPoisson, SumOf
-from .._base import Settings, System, _sample_box
-from ..rigid_body import _lie_poisson
-from ._case import ZooCase
+from ...structure import KnownPoisson, SumOf
+from .._base import BoxSampling, System, analytic_model
+from ..rigid_body import _lie_poisson, _rotational_energy
+from ._case import ZooCase, case_settings
+from ._parts import bath_energy, bath_temperature
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,47 +92,35 @@ class SpinningSatelliteConfig:
 
 def damper_temperature(config: SpinningSatelliteConfig, s):
     r""":math:`\theta = \theta_0 e^{s/c}`."""
-    return config.theta0 * jnp.exp(s / config.heat_capacity)
+    return bath_temperature(s, config.heat_capacity, config.theta0)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: SpinningSatelliteConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        inv = 1.0 / jnp.asarray(c.inertia, dtype=x.dtype)
-        kinetic = 0.5 * jnp.sum(x[:3] ** 2 * inv)
-        return kinetic + c.heat_capacity * c.theta0 * jnp.expm1(x[3] / c.heat_capacity)
+def _energy(c: SpinningSatelliteConfig, x: State) -> Scalar:
+    return _rotational_energy(c, x[:3]) + bath_energy(x[3], c.heat_capacity, c.theta0)
 
 
 def _poisson(x: State) -> Matrix:
     return jnp.zeros((4, 4), x.dtype).at[:3, :3].set(_lie_poisson(x[:3]))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: SpinningSatelliteConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        m = x[:3]
-        omega = m / jnp.asarray(c.inertia, dtype=x.dtype)
-        theta = damper_temperature(c, x[3])
-        # A v = m x v. Form A^T A, A^T A Omega = A^T (m x Omega) and |m x Omega|^2 from A and
-        # m x Omega rather than from |m|^2 1 - m m^T: with |m| ~ 1e4 that form cancels ~1e8-sized
-        # terms and loses ~1e-11 of the (small) wobble dissipation.
-        A = _lie_poisson(m)
-        a = A @ omega
-        G = A.T @ A
-        g = A.T @ a
-        top = jnp.concatenate([theta * G, -g[:, None]], axis=1)
-        bottom = jnp.concatenate([-g, (jnp.dot(a, a) / theta)[None]])[None, :]
-        return c.damping * jnp.concatenate([top, bottom], axis=0)
+def _friction(c: SpinningSatelliteConfig, x: State) -> Matrix:
+    m = x[:3]
+    omega = m / jnp.asarray(c.inertia, dtype=x.dtype)
+    theta = damper_temperature(c, x[3])
+    # A v = m x v. Form A^T A, A^T A Omega = A^T (m x Omega) and |m x Omega|^2 from A and
+    # m x Omega rather than from |m|^2 1 - m m^T: with |m| ~ 1e4 that form cancels ~1e8-sized
+    # terms and loses ~1e-11 of the (small) wobble dissipation.
+    A = _lie_poisson(m)
+    a = A @ omega
+    G = A.T @ A
+    g = A.T @ a
+    top = jnp.concatenate([theta * G, -g[:, None]], axis=1)
+    bottom = jnp.concatenate([-g, (jnp.dot(a, a) / theta)[None]])[None, :]
+    return c.damping * jnp.concatenate([top, bottom], axis=0)
 
 
 @dataclasses.dataclass(frozen=True)
-class SpinningSatellite(System):
+class SpinningSatellite(BoxSampling, System):
     """A major-axis spinner with a nutation damper (n = 4): offset m3 ~ 1e4, hours."""
 
     name = "spinning-satellite"
@@ -141,44 +129,23 @@ class SpinningSatellite(System):
         "L on m, E = sum m_i^2/(2 I_i) + U(s), S = s, double-bracket M that keeps |m|^2 and "
         "turns the wobble's energy into damper heat."
     )
+    names = ("m1", "m2", "m3", "s")
+    defaults = case_settings(dt=0.03, steps=300, trajectories=32)
     config: SpinningSatelliteConfig = SpinningSatelliteConfig()
 
     @property
     def max_substep(self) -> float:
         return min(0.01, 0.005 / self.config.nutation_frequency)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("m1", "m2", "m3", "s")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((3,)),
-            poisson=KnownPoisson(_poisson),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
-
-    def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 4"]:
-        """``x0_center + U(-1, 1) * x0_halfwidth`` per component."""
-        self._check_num(num)
-        return _sample_box(self.config.x0_center, self.config.x0_halfwidth, num, seed)
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((3,)),
+                              poisson=KnownPoisson(_poisson), friction=_friction)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.03, 300, 32
-
-CASE = ZooCase(
-    system=SpinningSatellite(),
-    flags={"entropy": "sum:3"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
+CASE = ZooCase.of(
+    SpinningSatellite(),
+    {"entropy": "sum:3"},
     time_unit="h",
-    test_trajectories=10,
     held_out=False,
     note="Lie-Poisson L and a double-bracket M to learn on a state with a 1e4 offset whose "
     "wobble (1e1-1e2) decays into heat.",

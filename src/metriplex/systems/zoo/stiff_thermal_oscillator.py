@@ -39,9 +39,10 @@ from jaxtyping import Float
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from .._base import Settings, System
-from ._case import ZooCase
+from ...structure import CanonicalPoisson, SumOf
+from .._base import System, _uniform_box, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import bath_energy, bath_temperature, hardening_frequency, oscillator_energy
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,37 +103,24 @@ class StiffThermalOscillatorConfig:
 
 def reservoir_temperatures(config: StiffThermalOscillatorConfig, s):
     r""":math:`\theta_i = \theta_0 e^{s_i/c_i}` for ``s`` of shape ``(..., 2)``."""
-    c = jnp.asarray(config.heat_capacity, dtype=s.dtype)
-    return config.theta0 * jnp.exp(s / c)
+    return bath_temperature(s, jnp.asarray(config.heat_capacity, dtype=s.dtype), config.theta0)
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: StiffThermalOscillatorConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        q, p = x[0], x[1]
-        mechanical = p**2 / (2.0 * c.mass) + 0.5 * c.stiffness * q**2 + 0.25 * c.quartic * q**4
-        C = jnp.asarray(c.heat_capacity, dtype=x.dtype)
-        return mechanical + jnp.sum(C * c.theta0 * jnp.expm1(x[2:4] / C))
+def _energy(c: StiffThermalOscillatorConfig, x: State) -> Scalar:
+    C = jnp.asarray(c.heat_capacity, dtype=x.dtype)
+    return oscillator_energy(c, x[0], x[1]) + jnp.sum(bath_energy(x[2:4], C, c.theta0))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: StiffThermalOscillatorConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        z = jnp.zeros((), x.dtype)
-        v = x[1] / c.mass
-        th = reservoir_temperatures(c, x[2:4])
-        u = jnp.stack([z, th[0], -v, z])
-        # kappa th1 th2 w w^T with w = (0, 0, 1/th1, -1/th2), written as (0, 0, th2, -th1).
-        w = jnp.stack([z, z, th[1], -th[0]])
-        friction = (c.friction / th[0]) * (u[:, None] * u[None, :])
-        conduction = (c.kappa / (th[0] * th[1])) * (w[:, None] * w[None, :])
-        return friction + conduction
+def _friction(c: StiffThermalOscillatorConfig, x: State) -> Matrix:
+    z = jnp.zeros((), x.dtype)
+    v = x[1] / c.mass
+    th = reservoir_temperatures(c, x[2:4])
+    u = jnp.stack([z, th[0], -v, z])
+    # kappa th1 th2 w w^T with w = (0, 0, 1/th1, -1/th2), written as (0, 0, th2, -th1).
+    w = jnp.stack([z, z, th[1], -th[0]])
+    friction = (c.friction / th[0]) * (u[:, None] * u[None, :])
+    conduction = (c.kappa / (th[0] * th[1])) * (w[:, None] * w[None, :])
+    return friction + conduction
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,31 +133,20 @@ class StiffThermalOscillator(System):
         "50x faster than the oscillation: canonical L in (q, p), S = s1 + s2, M = friction "
         "block on (p, s1) + Fourier conduction on (s1, s2)."
     )
+    names = ("q", "p", "s1", "s2")
+    defaults = case_settings(dt=0.05, steps=300, trajectories=32)
     config: StiffThermalOscillatorConfig = StiffThermalOscillatorConfig()
 
     @property
     def max_substep(self) -> float:
         # RK4 needs h * lambda well inside its stability region and accurate: h * lambda <= 0.1.
         c = self.config
-        q = abs(c.x0_center[0]) + abs(c.x0_halfwidth[0])
-        omega = float(np.sqrt((c.stiffness + 3.0 * c.quartic * q**2) / c.mass))
+        omega = hardening_frequency(c.stiffness, c.quartic, c.mass, c.x0_center, c.x0_halfwidth)
         return min(0.01 / omega, 0.1 / c.conduction_rate)
 
-    @property
-    def names(self) -> tuple[str, ...]:
-        return ("q", "p", "s1", "s2")
-
     def _build_model(self) -> GenericModel:
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf((2, 3)),
-            poisson=CanonicalPoisson(4, 1),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
+        return analytic_model(self.config, energy=_energy, entropy=SumOf((2, 3)),
+                              poisson=CanonicalPoisson(4, 1), friction=_friction)
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 4"]:
         r"""``(q, p, s1)`` uniform in the box, then :math:`s_2` from
@@ -177,25 +154,16 @@ class StiffThermalOscillator(System):
         self._check_num(num)
         c = self.config
         rng = np.random.default_rng(seed)
-        centre = np.asarray(c.x0_center, dtype=np.float64)
-        half = np.asarray(c.x0_halfwidth, dtype=np.float64)
-        qps = centre[None, :] + rng.uniform(-1.0, 1.0, size=(num, 3)) * half[None, :]
+        qps = _uniform_box(rng, c.x0_center, c.x0_halfwidth, num)
         ratio = 1.0 + c.imbalance * rng.uniform(-1.0, 1.0, size=num)
         c1, c2 = c.heat_capacity
         s2 = c2 * (qps[:, 2] / c1 + np.log(ratio))
         return np.concatenate([qps, s2[:, None]], axis=1)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.05, 300, 32
-
-CASE = ZooCase(
-    system=StiffThermalOscillator(),
-    flags={"poisson": "canonical:1", "entropy": "sum:2,3"},
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
-    time_unit="s",
-    test_trajectories=10,
+CASE = ZooCase.of(
+    StiffThermalOscillator(),
+    {"poisson": "canonical:1", "entropy": "sum:2,3"},
     held_out=True,
     note="Stiff: conduction 50x faster than the oscillation (2.5 per data step), entropies "
     "of order 1e-3 J/K at 300 K.",

@@ -37,9 +37,10 @@ from jaxtyping import Float
 from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
-from ...structure import CanonicalPoisson, Known, KnownFriction, SumOf
-from .._base import Settings, System
-from ._case import ZooCase
+from ...structure import CanonicalPoisson, SumOf
+from .._base import System, _sample_box, analytic_model
+from ._case import ZooCase, case_settings
+from ._parts import bath_temperature
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,40 +95,30 @@ def _extensions(q: State) -> State:
     return jnp.diff(jnp.concatenate([z, q, z]))
 
 
-@dataclasses.dataclass(frozen=True)
-class _Energy:
-    config: ThermoelasticChainConfig
-
-    def __call__(self, x: State) -> Scalar:
-        c = self.config
-        N = c.particles
-        q, p, s = x[:N], x[N : 2 * N], x[2 * N :]
-        r = _extensions(q)
-        springs = jnp.sum(0.5 * c.stiffness * r**2 + 0.25 * c.quartic * r**4)
-        heat = c.heat_capacity * c.theta0 * jnp.sum(jnp.expm1(s / c.heat_capacity))
-        return jnp.sum(p**2) / (2.0 * c.mass) + springs + heat
+def _energy(c: ThermoelasticChainConfig, x: State) -> Scalar:
+    N = c.particles
+    q, p, s = x[:N], x[N : 2 * N], x[2 * N :]
+    r = _extensions(q)
+    springs = jnp.sum(0.5 * c.stiffness * r**2 + 0.25 * c.quartic * r**4)
+    heat = c.heat_capacity * c.theta0 * jnp.sum(jnp.expm1(s / c.heat_capacity))
+    return jnp.sum(p**2) / (2.0 * c.mass) + springs + heat
 
 
-@dataclasses.dataclass(frozen=True)
-class _Friction:
-    config: ThermoelasticChainConfig
-
-    def __call__(self, x: State) -> Matrix:
-        c = self.config
-        N = c.particles
-        v = x[N : 2 * N] / c.mass
-        theta = c.theta0 * jnp.exp(x[2 * N :] / c.heat_capacity)
-        # Friction: pp = diag(gamma theta), ps = diag(-gamma v), ss = diag(gamma v^2 / theta).
-        pp = jnp.diag(c.friction * theta)
-        ps = jnp.diag(-c.friction * v)
-        # Conduction: ss = kappa (diag(sum_{j~i} theta_j / theta_i) - adjacency).
-        adjacency = jnp.eye(N, k=1, dtype=x.dtype) + jnp.eye(N, k=-1, dtype=x.dtype)
-        ss = jnp.diag(c.friction * v**2 / theta + c.conductivity * (adjacency @ theta) / theta)
-        ss = ss - c.conductivity * adjacency
-        out = jnp.zeros((3 * N, 3 * N), x.dtype)
-        out = out.at[N : 2 * N, N : 2 * N].set(pp)
-        out = out.at[N : 2 * N, 2 * N :].set(ps).at[2 * N :, N : 2 * N].set(ps)
-        return out.at[2 * N :, 2 * N :].set(ss)
+def _friction(c: ThermoelasticChainConfig, x: State) -> Matrix:
+    N = c.particles
+    v = x[N : 2 * N] / c.mass
+    theta = bath_temperature(x[2 * N :], c.heat_capacity, c.theta0)
+    # Friction: pp = diag(gamma theta), ps = diag(-gamma v), ss = diag(gamma v^2 / theta).
+    pp = jnp.diag(c.friction * theta)
+    ps = jnp.diag(-c.friction * v)
+    # Conduction: ss = kappa (diag(sum_{j~i} theta_j / theta_i) - adjacency).
+    adjacency = jnp.eye(N, k=1, dtype=x.dtype) + jnp.eye(N, k=-1, dtype=x.dtype)
+    ss = jnp.diag(c.friction * v**2 / theta + c.conductivity * (adjacency @ theta) / theta)
+    ss = ss - c.conductivity * adjacency
+    out = jnp.zeros((3 * N, 3 * N), x.dtype)
+    out = out.at[N : 2 * N, N : 2 * N].set(pp)
+    out = out.at[N : 2 * N, 2 * N :].set(ps).at[2 * N :, N : 2 * N].set(ps)
+    return out.at[2 * N :, 2 * N :].set(ss)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -140,11 +131,9 @@ class ThermoelasticChain(System):
         "friction heats each particle's reservoir, neighbouring reservoirs conduct heat: "
         "canonical L, S = sum s_i."
     )
+    max_substep = 0.005
+    defaults = case_settings(dt=0.025, steps=300, trajectories=24)
     config: ThermoelasticChainConfig = ThermoelasticChainConfig()
-
-    @property
-    def max_substep(self) -> float:
-        return 0.005
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -153,16 +142,8 @@ class ThermoelasticChain(System):
 
     def _build_model(self) -> GenericModel:
         N = self.config.particles
-        return GenericModel(
-            energy=Known(_Energy(self.config)),
-            entropy=SumOf(tuple(range(2 * N, 3 * N))),
-            poisson=CanonicalPoisson(3 * N, N),
-            friction=KnownFriction(_Friction(self.config)),
-        )
-
-    @property
-    def defaults(self) -> Settings:
-        return Settings(CASE_DT, CASE_STEPS, CASE_TRAJECTORIES, "zoo case (our choice)")
+        return analytic_model(self.config, energy=_energy, entropy=SumOf(range(2 * N, 3 * N)),
+                              poisson=CanonicalPoisson(3 * N, N), friction=_friction)
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num n"]:
         """Independent uniform :math:`q_i, p_i, s_i` (see :class:`ThermoelasticChainConfig`)."""
@@ -172,23 +153,13 @@ class ThermoelasticChain(System):
         half = np.repeat(
             [c.displacement_halfwidth, c.momentum_halfwidth, c.entropy_halfwidth], N
         )
-        rng = np.random.default_rng(seed)
-        return rng.uniform(-1.0, 1.0, size=(num, 3 * N)) * half[None, :]
+        return _sample_box(np.zeros(3 * N), half, num, seed)
 
 
-CASE_DT, CASE_STEPS, CASE_TRAJECTORIES = 0.025, 300, 24
-
-CASE = ZooCase(
-    system=ThermoelasticChain(),
-    flags={
-        "poisson": "canonical:10",
-        "entropy": "sum:20,21,22,23,24,25,26,27,28,29",
-    },
-    trajectories=CASE_TRAJECTORIES,
-    steps=CASE_STEPS,
-    dt=CASE_DT,
+CASE = ZooCase.of(
+    ThermoelasticChain(),
+    {"poisson": "canonical:10", "entropy": "sum:20,21,22,23,24,25,26,27,28,29"},
     time_unit="1 (nondimensional)",
-    test_trajectories=10,
     held_out=False,
     note="High dimension (n = 30): ten coupled modes, ten reservoirs, friction plus conduction.",
 )
