@@ -154,7 +154,7 @@ def cmd_rollout(args) -> None:
     from .diagnostics import rollout_data
     from .integrate import scheme_from_name, step_failure
     from .io import check_output_file, load, write, write_json
-    from .runs import check_names
+    from .runs import check_names, run_config
 
     out = _check_trajectory_out(args.out, args.overwrite)
     status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
@@ -169,6 +169,7 @@ def cmd_rollout(args) -> None:
     ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
+    units = run_config(args.run).get("units") or {}
     ids, t_out, x_out, status = [], [], [], []
     for k, T in enumerate(lengths):
         tid = int(data.ids[k])
@@ -177,6 +178,14 @@ def cmd_rollout(args) -> None:
         if stop < T:
             what = step_failure(scheme, ts[k, stop - 1], ts[k, stop])
             entry.update(status="failed", failed_at_t=float(ts[k, stop]), reason=what)
+            away = _departure(units, xs[k, :stop], data.names)
+            if away is not None:
+                entry["left_training_data"] = away
+                what += (f". Before that, the rollout had left the training data: "
+                         f"{away['variable']} was {away['standard_deviations']:.0f} training "
+                         f"standard deviations from its training mean at "
+                         f"t={float(ts[k, away['step']]):.6g}; the model was never fitted "
+                         "there (training trajectories that reach that region would help)")
             kept = (f"writing the {stop} states computed before it" if stop >= 2 else
                     "nothing written for it (a trajectory needs two states)")
             print(f"warning: trajectory {tid}: {what}; {kept}.", file=sys.stderr)
@@ -198,6 +207,30 @@ def cmd_rollout(args) -> None:
     n_failed = sum(e["status"] == "failed" for e in status)
     print(f"wrote {len(ids)} predicted trajectories to {out} (data's trajectory ids; "
           f"{n_failed} of {len(status)} failed, see {status_path})")
+
+
+#: How far (in training standard deviations from the training mean) a rolled-out state may go
+#: before a failure is blamed on extrapolation: the training data themselves rarely exceed 4.
+FAR_FROM_DATA = 6.0
+
+
+def _departure(units: dict, xs, names) -> dict | None:
+    """Where a rollout ``xs`` (its finite states) first went furthest outside the training
+    data, in the run's data units (``config.json``'s ``units``: each variable's training mean
+    and standard deviation); ``None`` when it stayed within :data:`FAR_FROM_DATA` of them or
+    the run has no units (an older run)."""
+    import numpy as np
+
+    shift, scale = units.get("shift"), units.get("scale")
+    if shift is None or scale is None or len(xs) == 0:
+        return None
+    z = np.abs((np.asarray(xs) - np.asarray(shift)) / np.asarray(scale))
+    z = np.where(np.isfinite(z), z, 0.0)
+    step, var = np.unravel_index(int(np.argmax(z)), z.shape)
+    if not z[step, var] > FAR_FROM_DATA:
+        return None
+    return {"variable": str(names[var]), "standard_deviations": float(z[step, var]),
+            "step": int(step)}
 
 
 def _chosen_trajectories(args):
