@@ -193,7 +193,10 @@ def test_help_lists_commands():
 
 
 def test_cli_solver_choices_match_the_library():
-    from metriplex.cli import _SOLVERS
+    from metriplex.cli import build_parser
     from metriplex.integrate import SOLVERS
 
-    assert _SOLVERS == SOLVERS
+    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    for command in ("rollout", "evaluate"):
+        solver = next(a for a in sub.choices[command]._actions if a.dest == "solver")
+        assert tuple(solver.choices) == SOLVERS

@@ -1,9 +1,9 @@
 """A small MLP whose hidden layers are shared by potentials, Poisson and friction networks.
 
-The structured outputs (antisymmetric L, lower-triangular B) are assembled by folding a fixed
-linear map into the last layer rather than by index gather/scatter: XLA's CPU backward of
-gathers costs ~30x its forward (see docs/design.md, 'Performance rules'), a folded matmul
-costs nothing extra.
+The structured outputs (antisymmetric L, lower-triangular B) are assembled by folding the fixed
+assembly into the last layer's weights once per batch (a signed gather of the weight rows),
+never by a gather or scatter per sample: XLA's CPU backward of gathers costs ~30x its forward
+(see docs/design.md, 'Performance rules'), so the per-sample work stays one matmul.
 """
 
 from __future__ import annotations
@@ -120,6 +120,17 @@ def lower_assembly(n: int) -> np.ndarray:
     return P
 
 
+@functools.lru_cache(maxsize=None)
+def signed_rows(n: int, triangle: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(rows, sign)`` with ``P == sign[:, None] * onehot(rows)`` for the assembly ``P`` of
+    ``triangle`` (``"skew"`` or ``"lower"``): the one output each flat matrix entry takes, and
+    its sign (0 for an entry that takes none, e.g. the skew diagonal)."""
+    P = skew_assembly(n) if triangle == "skew" else lower_assembly(n)
+    rows = np.argmax(np.abs(P), axis=1)
+    sign = P[np.arange(P.shape[0]), rows]
+    return rows, sign
+
+
 class FoldedHead(eqx.Module):
     """Final linear layer with a fixed assembly folded in: returns ``diag(r) P (W h + b)``.
 
@@ -146,10 +157,14 @@ class FoldedHead(eqx.Module):
         return skew_assembly(self.n) if self.triangle == "skew" else lower_assembly(self.n)
 
     def __call__(self, h):
-        P = self._assembly()
+        rows, sign = signed_rows(self.n, self.triangle)
         if self.row_scale is not None:
-            P = np.asarray(self.row_scale)[:, None] * P
-        P = jnp.asarray(P, h.dtype)
-        # P @ W does not depend on the sample, so under vmap XLA computes it once per batch.
-        flat = (P @ self.weight) @ h + P @ self.bias
-        return flat.reshape(self.n, self.n)
+            sign = np.asarray(self.row_scale) * sign
+        sign = jnp.asarray(sign, h.dtype)
+        # P W: every row of P holds at most one +-1, so P W is a signed gather of W's rows
+        # (exact, as the product was). It does not depend on the sample, so under vmap it is
+        # computed once per batch, and its backward is one scatter-add of n^2 x width per step;
+        # the dense product cost n^2 x m x width = O(n^4 width) and an n^2 x m constant.
+        weight = sign[:, None] * self.weight[rows]
+        bias = sign * self.bias[rows]
+        return (weight @ h + bias).reshape(self.n, self.n)
