@@ -1,4 +1,4 @@
-"""The core never imports the application layer (docs/design.md, 'Layers').
+"""The core never imports the application layer (docs/design.md, 'Layers and data flow').
 
 The application layer is ``metriplex/app/``; its modules' old paths (``metriplex.config``,
 ``metriplex.cli``, ...) are alias modules of it. A static scan of every import statement in
