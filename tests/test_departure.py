@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from metriplex._commands import FAR_FROM_DATA, _departure
+from metriplex.app._commands import FAR_FROM_DATA, _departure
 
 UNITS = {"shift": [0.0, 10.0], "scale": [1.0, 0.5]}
 

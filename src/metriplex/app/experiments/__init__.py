@@ -22,16 +22,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import plots
-from .._errors import MetriplexError
-from .._model import float_dtype, with_dtype
+from ..._errors import MetriplexError
+from ..._model import float_dtype, with_dtype
 from ..config import PRESETS, RunConfig, preset
 
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
-from ..diagnostics import error_over_time, evaluate, rollout_data, time_to_error
-from ..integrate import CrankNicolson, scheme_from_name
-from ..io import write, write_json
+from ...diagnostics import error_over_time, evaluate, rollout_data, time_to_error
+from ...integrate import CrankNicolson, scheme_from_name
+from ...io import write, write_json
 from ..runs import train_run
 
 
@@ -146,12 +146,12 @@ def run_experiment(
     """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
 
     ``size`` replaces the experiment's data and training sizes (e.g. to study coverage);
-    ``overrides`` replace fields of its :class:`~metriplex.config.RunConfig`. With
+    ``overrides`` replace fields of its :class:`~metriplex.app.config.RunConfig`. With
     ``defaults=True`` the run uses only the preset's structure (what is learned and what is
     given, and the Jacobi penalty for a learned L) and every other setting at its default, as a
     user without the preset would: no features, default learning rate, steps and schedule.
     """
-    from ..systems import generate, get_system
+    from ...systems import generate, get_system
 
     exp = _check_name(name)
     if degeneracy not in ("soft", "exact"):

@@ -1,0 +1,333 @@
+"""What each ``metriplex`` command does: its implementation and the helpers it needs.
+
+The parser (the options, their help, ``main``) is in :mod:`metriplex.app.cli`, which imports this
+module; this module never imports the parser.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from pathlib import Path
+
+from .._errors import MetriplexError
+
+
+def _config_from_args(args):
+    from .config import RunConfig, preset
+
+    base = preset(args.preset) if args.preset else RunConfig()
+    updates = {
+        f.name: getattr(args, f.name)
+        for f in dataclasses.fields(RunConfig)
+        if getattr(args, f.name, None) is not None
+    }
+    return dataclasses.replace(base, **updates)
+
+
+def _check_trajectory_out(path, overwrite: bool) -> Path:
+    from ..io import check_output_file, trajectory_suffixes
+
+    return check_output_file(path, overwrite=overwrite, suffixes=trajectory_suffixes())
+
+
+def _honour_model_dtype(run) -> None:
+    """Enable x64 before any array exists when the model file holds float64 weights: every
+    command reads a model in the precision it was trained in."""
+    from ..io import read_header
+
+    if read_header(run).get("dtype") == "float64":
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+
+
+def _positive_finite(value, option: str) -> None:
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise MetriplexError(f"{option} must be a positive finite number; got {value}.")
+
+
+def cmd_simulate(args) -> None:
+    from .. import systems
+    from .config import check_seed
+    from ..io import write
+
+    out = _check_trajectory_out(args.out, args.overwrite)
+    check_seed(args.seed)
+    if args.float64:
+        import jax
+
+        jax.config.update("jax_enable_x64", True)
+    system = systems.get_system(args.system, **_params(args.param))
+    data = systems.generate(
+        system, trajectories=args.trajectories, steps=args.steps, dt=args.dt, seed=args.seed
+    )
+    write(out, data)
+    print(f"wrote {len(data)} trajectories x {args.steps + 1} states of {args.system} to {out}")
+
+
+def _params(items):
+    params = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise MetriplexError(f"--param expects NAME=VALUE; got {item!r}.")
+        params[key.replace("-", "_")] = value
+    return params
+
+
+def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
+    """train's final line: how training ended, and how the held-out rollouts went."""
+    last = history.step[-1] if history.step else 0
+    ended = history.stopped or "completed"
+    if not history.converged and history.best_step == last and last > 0:
+        ended += "; the best model is the last one: not converged, allow more --steps"
+    if history.best_step == 0 and last > 0:
+        ended += ("; NO trained model rolled out the held-out trajectories better than the "
+                  "untrained one (kept): the data do not determine the dynamics away from the "
+                  "training trajectories; give more trajectories or more of the structure")
+    k = metrics.get("trajectories", 0)
+    failed = metrics.get("rollout_failures", 0)
+    err = metrics.get("rollout_error_mean")
+    where = metrics.get("evaluated_on", "")
+    if failed:
+        rollouts = f"{failed} of {k} rollouts on {where} FAILED (blew up or did not converge)"
+        done = metrics.get("rollout_error_mean_completed")
+        if done is not None:
+            rollouts += f"; error of the {k - failed} completed: {done:.3e}"
+    else:
+        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
+    return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
+
+
+def cmd_train(args) -> None:
+    from ._lock import RunLock
+    from ._selection import check_selection, choose_trajectories
+    from .config import validate
+    from ..io import read
+    from .runs import check_run_folder, evaluate_run, train_run, write_json
+
+    out = Path(args.out)
+    check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
+    config = _config_from_args(args)
+    _positive_finite(args.dt, "--dt")
+    selection = check_selection(trajectories=args.trajectories,
+                                validation_ids=args.validation_ids, split=args.split,
+                                validation=args.validation)
+    data = read(args.data, dt=args.dt)
+    validate(config, data.n)
+    trajectories, validation_ids = choose_trajectories(
+        data.ids, f"the data file {str(args.data)!r}", selection)
+    # The lock covers the evaluation and metrics.json too, not only the training.
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        model, history, train, valid, seconds = train_run(
+            data, config, out, overwrite=args.overwrite, resume=args.resume,
+            progress=not args.quiet, trajectories=trajectories,
+            validation_ids=validation_ids, source={"file": str(args.data), "dt": args.dt},
+        )
+        target = valid if valid is not None else train
+        del data, train  # the evaluation holds only what it rolls out (large data: memory)
+        metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
+                               progress=not args.quiet)
+        metrics["train_seconds"] = seconds
+        metrics["evaluated_on"] = ("validation trajectories" if valid is not None
+                                   else "training data")
+        metrics["stopped"] = history.stopped
+        write_json(out / "metrics.json", metrics)
+    print(_train_summary(history, metrics, seconds, out))
+    if history.stopped.startswith("interrupted"):
+        print(
+            f"metriplex train: interrupted; the best model so far and a checkpoint are in {out}. "
+            "Continue with the same command and --resume.",
+            file=sys.stderr,
+        )
+        return 130
+
+
+def cmd_rollout(args) -> None:
+    import numpy as np
+
+    from ..data import Trajectories
+    from ..diagnostics import rollout_data
+    from ..integrate import scheme_from_name, step_failure
+    from ..io import check_output_file, load, write, write_json
+    from .runs import check_names, run_config
+
+    out = _check_trajectory_out(args.out, args.overwrite)
+    status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
+                                    suffixes=(".json",))
+    scheme = scheme_from_name(_scheme(args), solver=args.solver)
+    chosen = _chosen_trajectories(args)
+    _honour_model_dtype(args.run)
+    model = load(args.run)
+    data = _read_data(args, chosen)
+    check_names(args.run, data)
+    result, _, lengths = rollout_data(model, data, scheme=scheme, progress=not args.quiet)
+    ts, _, _ = data.padded()  # the data's own float64 grid, not the model-precision copy
+    xs = np.asarray(result.xs, dtype=np.float64)
+    failed = np.asarray(result.failed_step)
+    units = run_config(args.run).get("units") or {}
+    ids, t_out, x_out, status = [], [], [], []
+    for k, T in enumerate(lengths):
+        tid = int(data.ids[k])
+        stop = T if failed[k] < 0 or failed[k] >= T else int(failed[k])
+        entry = {"trajectory": tid, "status": "ok", "states": stop, "samples": int(T)}
+        if stop < T:
+            what = step_failure(scheme, ts[k, stop - 1], ts[k, stop])
+            entry.update(status="failed", failed_at_t=float(ts[k, stop]), reason=what)
+            away = _departure(units, xs[k, :stop], data.names)
+            if away is not None:
+                entry["left_training_data"] = away
+                what += (f". Before that, the rollout had left the training data: "
+                         f"{away['variable']} was {away['standard_deviations']:.0f} training "
+                         f"standard deviations from its training mean at "
+                         f"t={float(ts[k, away['step']]):.6g}; the model was never fitted "
+                         "there (training trajectories that reach that region would help)")
+            kept = (f"writing the {stop} states computed before it" if stop >= 2 else
+                    "nothing written for it (a trajectory needs two states)")
+            print(f"warning: trajectory {tid}: {what}; {kept}.", file=sys.stderr)
+        if stop >= 2:  # the data's own trajectory id, so predictions match the truth by id
+            ids.append(np.full(stop, tid))
+            t_out.append(ts[k, :stop])
+            x_out.append(xs[k, :stop])
+        else:
+            entry["states"] = 0
+        status.append(entry)
+    if not ids:
+        raise MetriplexError(
+            f"no trajectory could be rolled out past its first step with the {scheme.name} "
+            f"scheme (each failure is named above); nothing to write to {str(out)!r}."
+        )
+    write(out, Trajectories(np.concatenate(ids), np.concatenate(t_out),
+                            np.concatenate(x_out), data.names))
+    write_json(status_path, {"scheme": scheme.name, "trajectories": status})
+    n_failed = sum(e["status"] == "failed" for e in status)
+    print(f"wrote {len(ids)} predicted trajectories to {out} (data's trajectory ids; "
+          f"{n_failed} of {len(status)} failed, see {status_path})")
+
+
+#: How far (in training standard deviations from the training mean) a rolled-out state may go
+#: before a failure is blamed on extrapolation: the training data themselves rarely exceed 4.
+FAR_FROM_DATA = 6.0
+
+
+def _departure(units: dict, xs, names) -> dict | None:
+    """Where a rollout ``xs`` (its finite states) first went furthest outside the training
+    data, in the run's data units (``config.json``'s ``units``: each variable's training mean
+    and standard deviation); ``None`` when it stayed within :data:`FAR_FROM_DATA` of them or
+    the run has no units (an older run)."""
+    import numpy as np
+
+    shift, scale = units.get("shift"), units.get("scale")
+    if shift is None or scale is None or len(xs) == 0:
+        return None
+    z = np.abs((np.asarray(xs) - np.asarray(shift)) / np.asarray(scale))
+    z = np.where(np.isfinite(z), z, 0.0)
+    step, var = np.unravel_index(int(np.argmax(z)), z.shape)
+    if not z[step, var] > FAR_FROM_DATA:
+        return None
+    return {"variable": str(names[var]), "standard_deviations": float(z[step, var]),
+            "step": int(step)}
+
+
+def _chosen_trajectories(args):
+    """``--trajectories`` and ``--dt`` of rollout and evaluate, checked before any work."""
+    from ._selection import parse_ids
+
+    _positive_finite(args.dt, "--dt")
+    return None if args.trajectories is None else parse_ids(args.trajectories, "--trajectories")
+
+
+def _read_data(args, chosen):
+    """DATA as read (with ``--dt``), only the ``--trajectories`` chosen."""
+    from ..io import read
+
+    data = read(args.data, dt=args.dt)
+    if chosen is not None:
+        data = data.select(chosen.pick(data.ids, f"the data file {str(args.data)!r}"))
+    return data
+
+
+def _scheme(args) -> str:
+    """The --scheme given, else the one the run in args.run was trained with."""
+    if args.scheme:
+        return args.scheme
+    from .runs import run_config
+
+    return run_config(args.run).get("config", {}).get("scheme", "cn")
+
+
+def cmd_evaluate(args) -> None:
+    import json
+
+    from ..io import check_output_file, check_output_folder, load, write_json
+    from .runs import check_names, evaluate_run
+
+    if args.out:
+        check_output_file(args.out, overwrite=args.overwrite)
+    if args.figures:
+        check_output_folder(args.figures, "--figures")
+    _positive_finite(args.horizon, "--horizon")
+    if args.verdict_steps < 1:
+        raise MetriplexError(
+            f"--verdict-steps must be >= 1 (training steps of the black-box reference); got "
+            f"{args.verdict_steps}. Pass --no-verdict to skip the verdict."
+        )
+    if args.strict and args.no_verdict:
+        raise MetriplexError(
+            "--strict exits with the verdict's outcome, and --no-verdict skips the verdict; "
+            "got both. Drop one of them."
+        )
+    _scheme(args)  # a damaged config.json is reported before any work
+    chosen = _chosen_trajectories(args)
+    _honour_model_dtype(args.run)
+    model = load(args.run)
+    data = _read_data(args, chosen)
+    check_names(args.run, data)
+    figures = Path(args.figures) if args.figures else None
+    metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
+                           solver=args.solver, progress=not args.quiet)
+    if not args.no_verdict:
+        from .runs import run_config, training_outcome
+        from ..verdict import verdict
+
+        cfg = run_config(args.run).get("config", {})
+        ended = training_outcome(args.run)
+        metrics["verdict"] = verdict(
+            model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],
+            width=cfg.get("width", 64), depth=cfg.get("depth", 2),
+            steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
+            batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
+        )
+        print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
+    if args.out:
+        write_json(Path(args.out), metrics)
+    summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
+    if "verdict" in metrics:
+        summary["verdict"] = metrics["verdict"]["outcome"]
+    from ..io import _strict
+
+    print(json.dumps(_strict(summary), indent=2, default=str))
+    if args.strict:
+        from ..verdict import EXIT_STATUS
+
+        return EXIT_STATUS[metrics["verdict"]["outcome"]]
+
+
+def cmd_reproduce(args) -> None:
+    from ._lock import RunLock
+    from .experiments import default_out, run_experiment
+    from .runs import check_run_folder
+
+    out = Path(args.out) if args.out else default_out(args.experiment, quick=args.quick,
+                                                      defaults=args.defaults)
+    check_run_folder(out, overwrite=args.overwrite)
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        run_experiment(args.experiment, quick=args.quick, out=out, overwrite=args.overwrite,
+                       degeneracy=args.degeneracy, progress=not args.quiet,
+                       defaults=args.defaults)

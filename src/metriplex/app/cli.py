@@ -1,0 +1,297 @@
+"""The ``metriplex`` command line: a thin front that parses options and calls the library.
+
+Bad input ends with one clear message on stderr and exit status 2, never a traceback.
+Here: the parser (every option and its help) and ``main``; what each command does is in
+:mod:`metriplex.app._commands`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+from ._commands import (_config_from_args, _train_summary, cmd_evaluate, cmd_reproduce,
+                        cmd_rollout, cmd_simulate, cmd_train)
+from .._errors import MetriplexError
+from .._solve._implicit import SOLVER_SUMMARIES
+from ..integrate import SCHEMES, SOLVERS
+
+#: ``_config_from_args`` and ``_train_summary`` live in _commands; importable from here as before.
+__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "_config_from_args", "_train_summary",
+           "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
+           "cmd_train", "main"]
+
+
+
+def _scheme_help(prefix: str, default: str) -> str:
+    """``--scheme``'s help, from the registry: every scheme's name and summary."""
+    names = " | ".join(f"{name} ({cls.summary})" for name, cls in SCHEMES.items())
+    return f"{prefix}{names} ({default})"
+
+
+def _solver_help() -> str:
+    """``--solver``'s help, from the implicit schemes' solver table."""
+    return "implicit steps: " + " | ".join(f"{k} ({v})" for k, v in SOLVER_SUMMARIES.items())
+
+EXIT_BAD_INPUT = 2
+EXIT_FAILED = 3
+
+#: A value that starts with a minus sign and a digit is a number, never an option: argparse
+#: alone reads "--lr -1e-3" as "--lr" without a value (it knows only -1 and -.5 as numbers).
+_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                              re.IGNORECASE)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, with negative numbers in any notation as values, and usage errors as one line
+    (the rule and the value, and where to look) instead of the whole usage text."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}. See `{self.prog} --help`.\n")
+
+
+def _add_structure_options(p: argparse.ArgumentParser) -> None:
+    from .config import (ENERGY_CHOICES, ENTROPY_CHOICES, FRICTION_CHOICES, JACOBI_CHOICES,
+                         POISSON_CHOICES, SCHEDULES, RunConfig, choices_help)
+
+    d = RunConfig()
+    g = p.add_argument_group("structure (what is learned, what is given)")
+    g.add_argument("--energy", help=choices_help(ENERGY_CHOICES))
+    g.add_argument("--entropy", help=choices_help(ENTROPY_CHOICES))
+    g.add_argument("--poisson", help=choices_help(POISSON_CHOICES))
+    g.add_argument("--friction", help=choices_help(FRICTION_CHOICES))
+    g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
+                   "penalties otherwise) | soft (penalties only) | exact (L and M by "
+                   "construction)")
+    g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
+                   "(both states of each pair, default) | midpoints (one per pair; with "
+                   "--scheme discrete-gradient about halves the step's cost)")
+    g.add_argument("--jacobi", help="Jacobi-identity penalty: " + choices_help(JACOBI_CHOICES))
+    g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
+    g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "
+                   "is evaluated on (default: all; fewer is cheaper, still unbiased)")
+    g.add_argument("--quadratic", action="store_true", default=None,
+                   help="add a learned quadratic form to the learned E and S networks (a "
+                   "second-order Taylor term that extrapolates the forces linearly; off by "
+                   "default)")
+    g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
+    g.add_argument("--features-for", help="networks that see the features: a comma list of "
+                   f"energy, entropy, friction (default {d.features_for})")
+    g.add_argument("--scheme", help=_scheme_help("training residual scheme: ", "default cn"))
+    w = p.add_argument_group("loss weights and optimisation")
+    w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
+    w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,
+                   help=f"|L grad S|^2 weight (default {d.w_degeneracy_L})")
+    w.add_argument("--w-degeneracy-M", dest="w_degeneracy_M", type=float,
+                   help=f"|M grad E|^2 weight (default {d.w_degeneracy_M})")
+    w.add_argument("--w-jacobi", type=float, help=f"Jacobi weight (default {d.w_jacobi})")
+    w.add_argument("--width", type=int, help=f"network width (default {d.width})")
+    w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
+    w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
+    w.add_argument("--weight-decay", type=float,
+                   help=f"AdamW weight decay (default {d.weight_decay})")
+    w.add_argument("--steps", type=int, help=f"the most optimiser steps (default {d.steps}); "
+                   "training usually stops earlier, when the held-out rollouts stop improving")
+    w.add_argument("--max-minutes", type=float, help="stop training after this many minutes "
+                   "(default: no time limit)")
+    w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
+    w.add_argument("--validation", type=float,
+                   help="fraction of the selected trajectories held out for validation, drawn "
+                   f"at random with --seed (default {d.validation}; 0 for none); to choose "
+                   "them, see --validation-ids and --split")
+    w.add_argument("--eval-every", type=int, help=f"steps between validations (default {d.eval_every})")
+    w.add_argument("--patience", type=int, help="validations without improvement before the "
+                   "learning rate is cut (x0.3, from the best model; after --lr-cuts cuts "
+                   "training stops; default 20)")
+    w.add_argument("--lr-cuts", type=int, help="learning-rate cuts before training stops "
+                   f"(default {d.lr_cuts})")
+    w.add_argument("--schedule", choices=sorted(SCHEDULES), help="learning-rate schedule: "
+                   + "; ".join(f"{k}: {v}" for k, v in SCHEDULES.items()).replace("%", "%%"))
+    w.add_argument("--lbfgs-steps", type=int, help="iterations of an L-BFGS finish on a fixed "
+                   "batch of up to 8192 training pairs after the Adam stage, kept only where "
+                   f"the held-out rollouts improve (default {d.lbfgs_steps}; 0 for none)")
+    w.add_argument("--input-noise", type=float, metavar="FRACTION", help="Gaussian noise on "
+                   "both states of every training pair, as a fraction of each variable's "
+                   f"standard deviation (default {d.input_noise}; 0 for none)")
+    w.add_argument("--checkpoint-every", type=int,
+                   help=f"validations between checkpoints (default {d.checkpoint_every})")
+    w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")
+    w.add_argument("--float64", action="store_true", default=None, help="train in float64")
+    w.add_argument("--data-parallel", action="store_true", default=None,
+                   help="split each batch over all local devices (GPUs, or CPU devices with "
+                   "XLA_FLAGS=--xla_force_host_platform_device_count=N)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="metriplex",
+        description="Learn thermodynamically consistent (GENERIC) dynamics "
+        "dx/dt = L(x) grad E(x) + M(x) grad S(x) from trajectories.",
+    )
+    parser.add_argument("--version", action="version", version=_version())
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("simulate", help="generate trajectories of a built-in system",
+                       description=_systems_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("system", metavar="SYSTEM", help="a built-in system (listed above)")
+    p.add_argument("--trajectories", type=int, required=True,
+                   help="number of trajectories, each from its own random initial state")
+    p.add_argument("--steps", type=int, required=True,
+                   help="steps per trajectory (each trajectory has STEPS + 1 samples)")
+    p.add_argument("--dt", type=float, required=True,
+                   help="time between samples, in the system's time unit")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the initial states (default 0)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="system parameter, e.g. --param parameter_set=spnn or --param inertia=10,20,40")
+    p.add_argument("--float64", action="store_true", help="integrate in float64")
+    p.add_argument("--out", required=True, help="data file to write: .npz, .csv, .h5 or .mat")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("train", help="learn a GENERIC model from trajectory data",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("data", metavar="DATA", help="trajectory data (format below)")
+    p.add_argument("--out", required=True, metavar="RUN_DIR",
+                   help="run folder: model.mpx, config.json, history.json, metrics.json, "
+                   "checkpoint.ckpt, figures/")
+    p.add_argument("--preset", help="rigid-body | pendulum-energetic | pendulum-temperature | "
+                   "gas-containers")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out "
+                   "(with the same DATA, --dt, trajectories and options; others are refused)")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    s = p.add_argument_group("which trajectories train and validate (the ids used are "
+                             "recorded in RUN_DIR/config.json)")
+    s.add_argument("--trajectories", metavar="IDS", help="use only these trajectory ids of "
+                   f"DATA, {_IDS} (default: all)")
+    s.add_argument("--validation-ids", metavar="IDS", help="these of the selected trajectories "
+                   "validate, the rest train (instead of the random --validation fraction)")
+    s.add_argument("--split", metavar="FILE", help="the split to use: a JSON file "
+                   '{"train": [ids], "validation": [ids]} (optionally "test": [ids], which '
+                   "must not overlap them), or a run folder (or its config.json) whose split "
+                   "is reused exactly")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
+    _add_structure_options(p)
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("rollout", help="predict every trajectory of DATA from its first state",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
+    p.add_argument("data", metavar="DATA", help="trajectories to predict (format below)")
+    p.add_argument("--out", required=True,
+                   help="predictions, in the data format: .npz, .csv, .h5 or .mat")
+    p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
+                                                 "with"))
+    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
+    p.add_argument("--trajectories", metavar="IDS",
+                   help=f"predict only these trajectory ids of DATA, {_IDS} (default: all)")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_rollout)
+
+    p = sub.add_parser("evaluate", help="metrics (and figures) of a trained model on DATA",
+                       epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
+    p.add_argument("data", metavar="DATA", help="test trajectories (format below)")
+    p.add_argument("--out", metavar="METRICS.json",
+                   help="write the metrics as strict JSON here (default: print a summary only)")
+    p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
+    p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
+                                                 "with"))
+    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
+    p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
+    p.add_argument("--trajectories", metavar="IDS",
+                   help=f"evaluate only these trajectory ids of DATA, {_IDS} (default: all; "
+                   "the ids evaluated are `trajectory_ids` in the JSON)")
+    p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
+    p.add_argument("--no-verdict", action="store_true",
+                   help="skip the 'is it GENERIC?' verdict (consistent | not consistent | "
+                   "cannot tell, each reason with its figure, under `verdict` in the JSON; it "
+                   "trains a black-box reference)")
+    p.add_argument("--verdict-steps", type=int, default=3000,
+                   help="training steps of the black-box reference (default 3000)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit with the verdict's outcome, for scripts: 0 consistent, 1 not "
+                   "consistent, 3 cannot tell (2 stays bad input); the outcome is also "
+                   "`verdict.outcome` in the --out JSON")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("reproduce", help="run a reference experiment end to end, with figures")
+    p.add_argument("experiment", metavar="EXPERIMENT",
+                   help="rigid-body | pendulum-energetic | pendulum-temperature | gas-containers")
+    p.add_argument("--quick", action="store_true", help="reduced size (about two minutes)")
+    p.add_argument("--out", default=None, help="output folder (default runs/EXPERIMENT)")
+    p.add_argument("--degeneracy", default="soft", help="soft | exact")
+    p.add_argument("--defaults", action="store_true",
+                   help="train with the experiment's structure only (what is learned, what is "
+                   "given) and default settings, as without a preset")
+    p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(func=cmd_reproduce)
+    return parser
+
+
+_OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
+_IDS = "a comma list with ranges such as 0,3,5-9"
+_DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), replacing "
+       "the file's times or supplying them (e.g. a .mat time vector that does not fit the "
+       "snapshots)")
+
+DATA_FORMAT = """\
+data format: one row per observed state, in one of
+  .csv  columns trajectory,t,<name_1>,...,<name_n> (integer trajectory id, time, the state)
+  .npz  arrays trajectory (N,), t (N,), x (N, n), optional names (n,)
+  .h5   one group per trajectory, each with datasets t (T,) and x (T, n)
+  .mat  snapshots (trajectories x variables x snapshots) with a time vector or step
+Trajectories may be ragged and unevenly sampled; samples within a trajectory are in time order.
+With --dt STEP the file's times are not read: each trajectory gets t = 0, STEP, 2*STEP, ...
+"""
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return f"metriplex {__version__}"
+
+
+def _systems_help() -> str:
+    try:
+        from .. import systems
+
+        return "Built-in systems:\n\n" + "\n\n".join(
+            s.help_text() for s in systems.SYSTEMS.values()
+        )
+    except Exception:  # the listing must never break --help
+        return "Generate trajectories of a built-in ground-truth system."
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = args.func(args)
+    except MetriplexError as e:
+        print(f"metriplex {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"metriplex {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except OSError as e:
+        where = f" {str(e.filename)!r}" if e.filename else ""
+        print(f"metriplex {args.command}: error: cannot access{where}: {e.strerror or e}. Check "
+              "the path and its permissions.", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return code or 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

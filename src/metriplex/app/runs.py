@@ -1,0 +1,381 @@
+"""Run folders: what ``metriplex train`` writes and ``rollout``/``evaluate`` read.
+
+A run folder holds ``model.mpx`` (the best model), ``config.json`` (the resolved configuration,
+with the data's variable names and the validation split), ``history.json``, ``checkpoint.ckpt``
+(to resume), ``metrics.json`` and ``figures/`` (each figure as PNG, PDF and the raw NPZ).
+While a training writes it, the folder also holds ``.metriplex.lock``: one training at a time
+owns a run folder (see ``_lock``).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+
+from . import plots
+from .._errors import MetriplexError, TrainingDiverged
+from ._lock import LOCK_NAME, RunLock, check_not_in_use
+from .._model import with_dtype
+from ._selection import TrajectoryIds, format_ids
+from ._build import build_loss, build_model, stopping_for, units_for
+from .config import RunConfig, validate
+from ..data import Trajectories, state_scale, time_scale
+from ..diagnostics import error_over_time, evaluate, rollout_data
+from ..integrate import scheme_from_name
+from ..io import check_output_folder, save, write_json
+from ..train import fit
+
+
+def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool = False) -> None:
+    """Whether a training may write the run folder ``out``; checked before any work, and
+    again once the folder is locked. Creates nothing."""
+    out = Path(out)
+    check_output_folder(out)
+    check_not_in_use(out)
+    if resume:
+        if not (out / "checkpoint.ckpt").is_file():
+            raise MetriplexError(
+                f"cannot resume: {str(out)!r} holds no checkpoint.ckpt. Start a new run without "
+                "--resume."
+            )
+        return
+    if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not overwrite:
+        raise MetriplexError(
+            f"output folder {str(out)!r} exists and is not empty; refusing to overwrite it. Pass "
+            "--overwrite, choose another --out, or --resume an interrupted run."
+        )
+
+
+def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
+    check_run_folder(out, overwrite=overwrite, resume=resume)
+    out.mkdir(parents=True, exist_ok=True)
+
+
+def train_run(
+    data: Trajectories,
+    config: RunConfig,
+    out: str | Path,
+    *,
+    overwrite: bool = False,
+    resume: bool = False,
+    progress: bool = True,
+    trajectories=None,
+    validation_ids=None,
+    source: dict | None = None,
+):
+    """Train a model described by ``config`` on ``data`` and fill the run folder ``out``.
+
+    ``trajectories``: the ids of ``data`` to use (default all). ``validation_ids``: the ids of
+    those that validate, the rest train (empty: no validation); by default
+    ``config.validation`` of them, drawn with ``config.seed``. ``source`` (e.g. the data file
+    and ``dt``) is recorded in ``config.json`` beside the data's fingerprint, which ``resume``
+    compares with the interrupted run's.
+    """
+    out = Path(out)
+    validate(config, data.n)
+    check_output_folder(out)
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        return _train_run(data, config, out, overwrite=overwrite, resume=resume,
+                          progress=progress, trajectories=trajectories,
+                          validation_ids=validation_ids, source=source)
+
+
+def split_trajectories(data: Trajectories, config: RunConfig, *, trajectories=None,
+                       validation_ids=None) -> tuple[Trajectories, Trajectories | None]:
+    """``(train, validation)`` of :func:`train_run` (see its ``trajectories`` and
+    ``validation_ids``); ids that ``data`` lack, or no trajectory left to train, are refused."""
+    if trajectories is not None:
+        chosen = TrajectoryIds.of(np.asarray(trajectories).reshape(-1).tolist(),
+                                  "trajectories")
+        if not len(chosen):
+            raise MetriplexError("trajectories is empty; give at least one id (None: all).")
+        data = data.select(chosen.pick(data.ids, "the data"))
+    if validation_ids is None:
+        return data.split(config.validation, seed=config.seed)
+    held = TrajectoryIds.of(np.asarray(validation_ids).reshape(-1).tolist(), "validation_ids")
+    valid = held.pick(data.ids, "the selected trajectories")
+    rest = np.setdiff1d(data.ids, valid)
+    if len(rest) == 0:
+        raise MetriplexError(
+            f"validation_ids takes every selected trajectory ({format_ids(valid)}), which "
+            "leaves none to train on; leave at least one out of it."
+        )
+    return data.select(rest), (data.select(valid) if len(valid) else None)
+
+
+def _describe_data(info: dict) -> str:
+    where = f"{info['file']!r}" if info.get("file") else "data"
+    if info.get("dt") is not None:
+        where += f" with --dt {info['dt']!r}"
+    ids = info.get("trajectory_ids") or []
+    rows, n = (info.get("shape") or [None, None])[:2]
+    return (f"{where} ({len(ids)} trajectories, ids {format_ids(ids)}; {rows} rows x {n} "
+            f"variables; sha256 {str(info.get('sha256'))[:12]})")
+
+
+def _check_resume(stored: dict, data_info: dict, train, valid) -> None:
+    """``--resume`` continues only the interrupted run: the same data, the same split."""
+    old = stored.get("data")
+    if isinstance(old, dict) and old.get("sha256") and old.get("sha256") != data_info["sha256"]:
+        raise MetriplexError(
+            f"--resume needs the data of the interrupted run, but they differ: it trained on "
+            f"{_describe_data(old)}; this command gives {_describe_data(data_info)}. Resume "
+            "with the same data file (and the same --dt), or start a new run (--overwrite)."
+        )
+    ids = (sorted(int(i) for i in train.ids),
+           [] if valid is None else sorted(int(i) for i in valid.ids))
+    before = (sorted(stored.get("train_trajectories", ids[0])),
+              sorted(stored.get("validation_trajectories", ids[1])))
+    if before != ids:
+        raise MetriplexError(
+            f"--resume needs the trajectories of the interrupted run, but they differ: it "
+            f"trained on {format_ids(before[0])} and validated on {format_ids(before[1])}; this "
+            f"command trains on {format_ids(ids[0])} and validates on {format_ids(ids[1])}. "
+            "Repeat its --trajectories, --validation-ids or --split, or pass --split RUN_DIR to "
+            "reuse its split."
+        )
+
+
+def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=None,
+               validation_ids=None, source=None):
+    if config.float64:
+        jax.config.update("jax_enable_x64", True)
+    dtype = jnp.float64 if config.float64 else jnp.float32
+    _prepare_dir(out, overwrite=overwrite, resume=resume)
+    if resume:
+        stored = run_config(out).get("config")
+        if stored is None:
+            raise MetriplexError(
+                f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
+                "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
+            )
+        saved = RunConfig.from_json(stored)
+        if saved != config:
+            diff = {k: (getattr(saved, k), getattr(config, k)) for k in saved.to_json()
+                    if getattr(saved, k) != getattr(config, k)}
+            raise MetriplexError(
+                f"--resume needs the configuration of the interrupted run; these differ "
+                f"(saved, given): {diff}. Repeat the original options."
+            )
+    train, valid = split_trajectories(data, config, trajectories=trajectories,
+                                      validation_ids=validation_ids)
+    data_info = {**(source or {}), **data.fingerprint()}
+    if resume:
+        _check_resume(run_config(out), data_info, train, valid)
+    model_key, fit_key = jr.split(jr.key(config.seed))
+    units = units_for(config, train)
+    model = build_model(config, train, key=model_key, units=units)
+    model = with_dtype(model, dtype)
+    loss = build_loss(config, units)
+    header = {
+        "config": config.to_json(),
+        "names": list(data.names),
+        "n": data.n,
+        "train_trajectories": [int(i) for i in train.ids],
+        "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
+        # "ids": given (--validation-ids, --split); "fraction": config.validation of them at
+        # random (config.seed), or the last samples of a single trajectory.
+        "validation_by": "fraction" if validation_ids is None else "ids",
+        # The whole data file as read (--dt applied), whichever trajectories were selected.
+        "data": data_info,
+        "loss_terms": list(loss.names),
+        "units": units.to_json(),
+    }
+    write_json(out / "config.json", header)
+    start = time.perf_counter()
+    try:
+        model, history = fit(
+            model,
+            train,
+            loss=loss,
+            learning_rate=config.lr,
+            weight_decay=config.weight_decay,
+            steps=config.steps,
+            batch_size=config.batch_size,
+            validation=valid,
+            eval_every=config.eval_every,
+            stopping=stopping_for(config),
+            max_seconds=None if config.max_minutes is None else 60.0 * config.max_minutes,
+            scale=units.rate,
+            dtype=dtype,
+            progress=progress,
+            checkpoint=str(out / "checkpoint.ckpt"),
+            checkpoint_every=config.checkpoint_every,
+            resume=resume,
+            data_parallel=config.data_parallel,
+            lbfgs_steps=config.lbfgs_steps,
+            input_noise=config.input_noise,
+            key=fit_key,
+        )
+    except TrainingDiverged as e:
+        if e.model is not None:
+            save(out / "model.mpx", e.model, n=data.n, names=data.names)
+        if e.history is not None:
+            write_json(out / "history.json", e.history.to_json())
+        raise
+    seconds = time.perf_counter() - start
+    save(out / "model.mpx", model, n=data.n, names=data.names,
+         extra={"train_seconds": seconds})
+    write_json(out / "history.json", history.to_json())
+    plots.save_figure(
+        plots.loss_curves(history), out / "figures" / "loss",
+        step=np.asarray(history.step),
+        **{f"train_{k}": np.asarray(v) for k, v in history.train.items()},
+        **{f"valid_{k}": np.asarray(v) for k, v in history.valid.items()},
+    )
+    return model, history, train, valid, seconds
+
+
+def run_config(run_dir: str | Path) -> dict:
+    path = Path(run_dir) / "config.json"
+    if not path.is_file():
+        return {}
+    try:
+        obj = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as e:
+        raise MetriplexError(
+            f"{str(path)!r} is not valid JSON ({e}); the run folder is damaged. Delete that "
+            "file (the scheme then defaults to cn; pass --scheme), or re-train."
+        ) from None
+    if not isinstance(obj, dict) or not isinstance(obj.get("config", {}), dict):
+        raise MetriplexError(
+            f"{str(path)!r} does not hold a run configuration (an object with a `config` "
+            "object); the run folder is damaged. Delete that file, or re-train."
+        )
+    return obj
+
+
+def training_outcome(run_dir: str | Path) -> dict:
+    """How the run's training ended, from its ``history.json``: ``converged`` (bool) and
+    ``stopped`` (the reason), both ``None`` when unknown (a bare model file, no history, or
+    one that cannot be read). The verdict weighs them."""
+    path = Path(run_dir) / "history.json"
+    try:
+        obj = json.loads(path.read_text()) if path.is_file() else {}
+    except (OSError, ValueError, UnicodeDecodeError):
+        obj = {}
+    if not isinstance(obj, dict):
+        obj = {}
+    converged = obj.get("converged")
+    stopped = obj.get("stopped")
+    return {"converged": converged if isinstance(converged, bool) else None,
+            "stopped": stopped if isinstance(stopped, str) and stopped else None}
+
+
+def check_names(run_dir, data: Trajectories) -> None:
+    """The data must have the columns the model was trained on, in the same order."""
+    from ..io import read_header
+
+    header = read_header(run_dir)
+    n, names = header.get("n"), list(header.get("names", []))
+    if n is not None and n != data.n:
+        raise MetriplexError(
+            f"the data have {data.n} state variables but the model in {str(run_dir)!r} was "
+            f"trained on {n} ({', '.join(names)}). Pass data with the same columns."
+        )
+    if names and list(data.names) != names:
+        unknown = [c for c in data.names if c not in names]
+        raise MetriplexError(
+            f"the data's columns ({', '.join(data.names)}) differ from the model's "
+            f"({', '.join(names)})" + (f"; unknown: {', '.join(unknown)}" if unknown else
+                                       "; same names in another order") +
+            ". Rename or reorder the columns to match the training data."
+        )
+
+
+def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path | None = None,
+                 horizon: float | None = None, solver: str | None = None,
+                 progress: bool = False) -> dict:
+    """Metrics on ``data`` and, if ``figures`` is given, the standard figure set; the
+    trajectories are rolled out once for both (with a progress bar when ``progress`` and the
+    data are large enough to be rolled out in batches)."""
+    sch = scheme_from_name(scheme, solver=solver)
+    rollout = rollout_data(model, data, scheme=sch, progress=progress)
+    report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout)
+    if figures is not None:
+        report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout,
+                       progress=progress)
+    return report
+
+
+def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
+                   solver: str | None = None, rollout=None, progress: bool = False):
+    """The report figure set: every trajectory's rollout error over time (failed rollouts
+    marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
+    trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
+    over time, and the learned E and S along the rollout (each marks where the rollout failed,
+    if it did). Residuals are in the data's rate units (data scale / time scale).
+    ``rollout``: what :func:`~metriplex.diagnostics.rollout_data` returned for this model, data
+    and scheme, to reuse. ``progress``: a bar over the four figures (large data take a while
+    to draw)."""
+    from tqdm.auto import tqdm
+
+    sch = scheme_from_name(scheme, solver=solver)
+    out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
+    with tqdm(total=4, disable=not progress, desc="figures", unit="figure", leave=False) as bar:
+        _draw_report(model, data, folder, sch, k, out, xs, lengths, bar)
+
+
+def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
+    all_ts = np.asarray(out.ts, dtype=np.float64)
+    all_pred = np.asarray(out.xs, dtype=np.float64)
+    failed = np.asarray(out.failed_step)
+    T = int(lengths[k])
+    ts, pred, obs = all_ts[k, :T], all_pred[k, :T], xs[k, :T]
+    failed_at = float(ts[min(int(failed[k]), T - 1)]) if failed[k] >= 0 else None
+    names = list(data.names)
+    plots.save_figure(plots.trajectories(ts, pred, obs, names, failed_at=failed_at),
+                      folder / "trajectories", t=ts, learned=pred, observed=obs,
+                      names=np.array(names), failed_step=failed[k])
+    bar.update()
+    # Errors of every trajectory: NaN after a failure (never a number standing for it).
+    errors = np.full(all_pred.shape[:2], np.nan)
+    for j, Tj in enumerate(lengths):
+        errors[j, :Tj] = error_over_time(all_pred[j, :Tj], xs[j, :Tj])
+    scale = state_scale(data.x)
+    per_var = np.abs(pred - obs) / scale[None, :]
+    plots.save_figure(
+        plots.rollout_errors(all_ts, errors, failed_step=failed,
+                             per_variable=dict(zip(names, per_var.T)), trajectory=k,
+                             ids=list(data.ids)),
+        folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
+        error_per_variable=per_var, names=np.array(names))
+    bar.update()
+    # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
+    rate = scale / time_scale(data, scale)
+    tk, xk = data.select([data.ids[k]]).t[:T], obs
+    dtype = out.xs.dtype
+    x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
+    dt = jnp.asarray(np.diff(tk), dtype)
+    res = np.asarray(_pair_residuals(model, sch, x0, x1, dt), dtype=np.float64) / rate[None, :]
+    plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
+                      t=tk[1:], residual=res, names=np.array(names))
+    bar.update()
+    xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
+    E, S = (np.asarray(v, dtype=np.float64) for v in _potentials(model, xp))
+    plots.save_figure(plots.energy_entropy(ts, E, S, failed_at=failed_at),
+                      folder / "energy_entropy", t=ts, energy=E, entropy=S)
+    bar.update()
+
+
+@eqx.filter_jit
+def _pair_residuals(model, scheme, x0, x1, dt):
+    """The scheme's residual of every pair (compiled once: op by op, each operation of the
+    model would compile on its own)."""
+    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
+    return jax.vmap(scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
+
+
+@eqx.filter_jit
+def _potentials(model, xs):
+    return jax.vmap(model.energy)(xs), jax.vmap(model.entropy)(xs)
