@@ -20,6 +20,7 @@ import optax
 from tqdm.auto import tqdm
 
 from ._errors import MetriplexError, TrainingDiverged
+from ._interrupt import CtrlC
 from ._model import GenericModel, float_dtype, with_dtype
 from ._train import (
     History,
@@ -354,6 +355,7 @@ def fit(
                 state.train_value, state.train_parts = eval_pairs(state.params, train_eval,
                                                                   eval_key)
                 record_evaluation()
+                ctrl_c.check()
                 if max_seconds is not None and history.time[-1] >= max_seconds:
                     break
         except KeyboardInterrupt:
@@ -366,25 +368,28 @@ def fit(
     evaluations = 0
     bar = tqdm(total=steps, initial=state.done, disable=not progress, desc="fit", unit="step",
                leave=False)
-    try:
-        finished = resume and (
-            state.done >= steps or history.stopped.startswith(("early stop", "converged")))
-        if resume and not finished:
-            run_next_chunk()  # the restored history already holds the evaluation at its step
-        while not finished:
-            record_evaluation()
-            evaluations += 1
-            if evaluations % max(checkpoint_every, 1) == 0:
-                save_checkpoint()
-            if should_stop():
-                break
-            run_next_chunk()
-    except KeyboardInterrupt:
-        history.stopped = f"interrupted at step {state.done}"
-    finally:
-        bar.close()
-    if (lbfgs_steps and not history.stopped.startswith("interrupted")
-            and history.lbfgs_steps == 0):
-        lbfgs_finish()
+    with CtrlC() as ctrl_c:
+        try:
+            finished = resume and (
+                state.done >= steps or history.stopped.startswith(("early stop", "converged")))
+            if resume and not finished:
+                run_next_chunk()  # the restored history already holds the evaluation at its step
+            while not finished:
+                ctrl_c.check()
+                record_evaluation()
+                evaluations += 1
+                if evaluations % max(checkpoint_every, 1) == 0:
+                    save_checkpoint()
+                ctrl_c.check()
+                if should_stop():
+                    break
+                run_next_chunk()
+        except KeyboardInterrupt:
+            history.stopped = f"interrupted at step {state.done}"
+        finally:
+            bar.close()
+        if (lbfgs_steps and not history.stopped.startswith("interrupted")
+                and history.lbfgs_steps == 0):
+            lbfgs_finish()
     save_checkpoint()
     return eqx.combine(state.best_params, static), history
