@@ -3,6 +3,8 @@
 import contextlib
 import io
 import os
+import shutil
+import tempfile
 import time
 
 os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
@@ -28,31 +30,49 @@ import pytest  # noqa: E402
 
 #: Entries of the compilation cache older than this are deleted at the start of a run.
 COMPILATION_CACHE_DAYS = 3
+#: Where the controller tells the xdist workers its compilation cache for this run (without
+#: pytest's cache folder, ``-p no:cacheprovider``).
+RUN_CACHE_VARIABLE = "METRIPLEX_TESTS_RUN_JAX_CACHE"
 
 
 def pytest_configure(config):
     """Keep XLA's compiled programs between runs in pytest's cache folder
-    (``.pytest_cache/d/jax-compilation-cache``; none with ``-p no:cacheprovider``).
+    (``.pytest_cache/d/jax-compilation-cache``); with ``-p no:cacheprovider``, for this run
+    only, in a temporary folder that the run removes at its end (it starts cold, as on a fresh
+    clone), unless ``JAX_COMPILATION_CACHE_DIR`` names one. ``JAX_ENABLE_COMPILATION_CACHE=0``
+    turns caching off.
 
     Compiling is most of the suite's time, and a test compiles the same programs on every run.
     A cache hit returns the executable that compiling the same program gives, so no result
     depends on the cache, nor on which tests ran before. Both xdist workers share it, and so do
     the processes that tests start (through the environment; the benchmark test removes it, as
-    it times compilation). An entry read while another process writes it is a miss (see the
-    warning filters in pyproject.toml).
+    it times compilation): within one run, these compile many of the programs that another
+    process has compiled already. An entry read while another process writes it is a miss (see
+    the warning filters in pyproject.toml).
     """
-    cache = getattr(config, "cache", None)
-    if cache is None:
+    if os.environ.get("JAX_ENABLE_COMPILATION_CACHE", "1").lower() in ("0", "false"):
         return
-    folder = cache.mkdir("jax-compilation-cache")
-    if not hasattr(config, "workerinput"):  # the controller, before any worker starts
-        too_old = time.time() - COMPILATION_CACHE_DAYS * 86400
-        for entry in folder.iterdir():
-            try:
-                if entry.stat().st_mtime < too_old:
-                    entry.unlink()
-            except OSError:
-                pass
+    cache = getattr(config, "cache", None)
+    if cache is not None:
+        folder = cache.mkdir("jax-compilation-cache")
+        if not hasattr(config, "workerinput"):  # the controller, before any worker starts
+            too_old = time.time() - COMPILATION_CACHE_DAYS * 86400
+            for entry in folder.iterdir():
+                try:
+                    if entry.stat().st_mtime < too_old:
+                        entry.unlink()
+                except OSError:
+                    pass
+    elif hasattr(config, "workerinput"):  # the controller's folder for this run
+        folder = os.environ.get(RUN_CACHE_VARIABLE)
+        if folder is None:
+            return
+    elif "JAX_COMPILATION_CACHE_DIR" in os.environ:  # the user's own cache
+        return
+    else:  # the controller, or a run without xdist: a folder for this run
+        folder = tempfile.mkdtemp(prefix="metriplex-tests-jax-cache-")
+        os.environ[RUN_CACHE_VARIABLE] = folder
+        config.add_cleanup(lambda: shutil.rmtree(folder, ignore_errors=True))
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     os.environ["JAX_COMPILATION_CACHE_DIR"] = str(folder)
