@@ -108,11 +108,18 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
+        "kept_step": history.best_step,
         "stopped": history.stopped,
         "converged": history.converged,
         "data_seconds": gen_seconds,
         "overrides": overrides,
     }
+
+
+def _kept(row: dict) -> str:
+    """The step of the kept model; 0 is the untrained one (training never beat it)."""
+    step = row.get("kept_step")
+    return "-" if step is None else ("0 (untrained)" if step == 0 else str(step))
 
 
 def _fmt(v: float) -> str:
@@ -121,16 +128,17 @@ def _fmt(v: float) -> str:
 
 def print_table(rows: list[dict], file=sys.stdout) -> None:
     head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | steps | "
-            "train s | bar |")
+            "kept | train s | bar |")
     print(head, file=file)
-    print("|" + "---|" * 10, file=file)
+    print("|" + "---|" * 11, file=file)
     for r in rows:
         met = r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
         name = r["system"] + (" (held out)" if r["held_out"] else "")
         print(
             f"| {name} | {r['n']} | `{r['flags']}` | {_fmt(r['rel_l2'])} | "
             f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/{r['test_trajectories']} | "
-            f"{_fmt(r['ground_truth_cn_rel_l2'])} | {r['steps']} | {r['train_seconds']:.0f} | "
+            f"{_fmt(r['ground_truth_cn_rel_l2'])} | {r['steps']} | {_kept(r)} | "
+            f"{r['train_seconds']:.0f} | "
             f"{'met' if met else 'NOT met'} |",
             file=file, flush=True,
         )
