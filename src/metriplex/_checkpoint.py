@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import io as _io
 import json
+import os
 from pathlib import Path
+from typing import Any
 
 import equinox as eqx
 
@@ -13,7 +15,7 @@ from ._errors import MetriplexError
 MAGIC = b"METRIPLEX-CHECKPOINT\n"
 
 
-def save(path, tree, meta: dict) -> None:
+def save(path: str | os.PathLike, tree: Any, meta: dict) -> None:
     from .io import _json_default, atomic_write
 
     buf = _io.BytesIO()
@@ -24,7 +26,7 @@ def save(path, tree, meta: dict) -> None:
         f.write(buf.getvalue())
 
 
-def load(path, like):
+def load(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
     path = Path(path)
     if not path.exists():
         raise MetriplexError(

@@ -1,5 +1,12 @@
 """The one exception type that the command line turns into a clean message."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
+
 
 class MetriplexError(ValueError):
     """Bad input or an unrecoverable condition, explained: the rule, the value, the fix."""
@@ -9,7 +16,8 @@ class RolloutFailure(MetriplexError):
     """A rollout step failed: an implicit step did not converge, or an explicit step gave a
     non-finite state. ``partial`` holds the states computed before it."""
 
-    def __init__(self, message: str, *, partial=None, trajectory: int = 0, time: float = 0.0):
+    def __init__(self, message: str, *, partial: np.ndarray | None = None, trajectory: int = 0,
+                 time: float = 0.0) -> None:
         super().__init__(message)
         self.partial = partial
         self.trajectory = trajectory
@@ -19,7 +27,7 @@ class RolloutFailure(MetriplexError):
 class TrainingDiverged(MetriplexError):
     """A loss term became non-finite. ``model`` is the best model before it; ``history`` too."""
 
-    def __init__(self, message: str, *, model=None, history=None):
+    def __init__(self, message: str, *, model: Any = None, history: Any = None) -> None:
         super().__init__(message)
         self.model = model
         self.history = history

@@ -19,7 +19,7 @@ class CtrlC:
     handler, or an ignored SIGINT, is left alone).
     """
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.requested = False
         self._previous = None
 

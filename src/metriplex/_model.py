@@ -2,7 +2,7 @@ r"""The GENERIC model :math:`\dot x = L(x)\nabla E(x) + M(x)\nabla S(x)`."""
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
 import equinox as eqx
 import jax
@@ -13,6 +13,12 @@ from .structure import _registry
 from .structure.friction import AbstractFriction
 from .structure.poisson import AbstractPoisson
 from .structure.potential import AbstractPotential
+
+if TYPE_CHECKING:
+    import numpy as np
+    from jax.typing import DTypeLike
+
+_M = TypeVar("_M")
 
 
 class Terms(NamedTuple):
@@ -98,7 +104,7 @@ class GenericModel(eqx.Module):
         }
 
     @classmethod
-    def from_spec(cls, spec: dict[str, Any], n: int, *, key) -> "GenericModel":
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "GenericModel":
         k1, k2, k3, k4 = jax.random.split(key, 4)
         return cls(
             energy=_registry.from_spec("potential", spec["energy"], n, key=k1),
@@ -108,7 +114,7 @@ class GenericModel(eqx.Module):
         )
 
 
-def float_dtype(model, default=None):
+def float_dtype(model: Any, default: DTypeLike | None = None) -> np.dtype:
     """The dtype of the model's floating-point weights (``default``, or JAX's default float
     type, for a model without any, such as a ground-truth system)."""
     leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
@@ -117,7 +123,7 @@ def float_dtype(model, default=None):
     return jnp.zeros(()).dtype if default is None else jnp.dtype(default)
 
 
-def with_dtype(model, dtype):
+def with_dtype(model: _M, dtype: DTypeLike) -> _M:
     """``model`` with every floating-point weight cast to ``dtype``."""
     return jax.tree_util.tree_map(
         lambda a: a.astype(dtype) if eqx.is_inexact_array(a) else a, model

@@ -5,7 +5,7 @@ device, from which the compiled training step gathers its minibatches).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -14,6 +14,10 @@ import numpy as np
 from ._errors import MetriplexError
 from .data import Pairs, Trajectories
 from .losses import Batch
+
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+    from numpy.typing import ArrayLike
 
 
 class PairRows(NamedTuple):
@@ -31,7 +35,8 @@ class PairRows(NamedTuple):
         return int(self.first.shape[0])
 
     @classmethod
-    def of(cls, data, n: int | None, what: str) -> "PairRows":
+    def of(cls, data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],
+           n: int | None, what: str) -> "PairRows":
         """The pairs of ``data`` (:class:`Trajectories`, :class:`Pairs` or ``(x0, x1, dt)``),
         checked: shapes, ``n`` variables, finite states, finite positive steps."""
         if isinstance(data, Trajectories):
@@ -74,7 +79,7 @@ class PairRows(NamedTuple):
         if not np.all(np.isfinite(self.x)):
             raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
 
-    def batch(self, idx, scale, dtype) -> Batch:
+    def batch(self, idx: ArrayLike, scale: ArrayLike, dtype: DTypeLike) -> Batch:
         """The pairs ``idx`` (a few thousand: evaluation subsets) as a :class:`Batch`."""
         idx = np.asarray(idx)
 
@@ -96,7 +101,7 @@ class PairStore(NamedTuple):
     scale: jax.Array
 
     @classmethod
-    def of(cls, rows: PairRows, scale, dtype) -> "PairStore":
+    def of(cls, rows: PairRows, scale: ArrayLike, dtype: DTypeLike) -> "PairStore":
         def put(a):
             return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
 
@@ -107,6 +112,6 @@ class PairStore(NamedTuple):
     def count(self) -> int:
         return int(self.first.shape[0])
 
-    def take(self, idx) -> Batch:
+    def take(self, idx: jax.Array) -> Batch:
         return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
                      self.scale)

@@ -7,6 +7,7 @@ flow). The judgement itself, its checks and their limits are in :mod:`metriplex.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -16,10 +17,15 @@ import numpy as np
 
 from ._errors import TrainingDiverged
 from ._model import Terms, with_dtype
+from ._types import Matrix, State
 from .data import Trajectories, state_scale, time_scale
 from .losses import CrankNicolsonResidual
 from .structure._mlp import Hidden, standardise
 from .structure.potential import ZeroPotential
+
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+    from numpy.typing import ArrayLike
 
 
 class BlackBoxModel(eqx.Module):
@@ -40,7 +46,8 @@ class BlackBoxModel(eqx.Module):
     energy: ZeroPotential
     entropy: ZeroPotential
 
-    def __init__(self, n, *, width=64, depth=2, data, rate=None, key):
+    def __init__(self, n: int, *, width: int = 64, depth: int = 2, data: ArrayLike,
+                 rate: ArrayLike | None = None, key: jax.Array) -> None:
         from .structure._mlp import data_statistics
 
         k1, k2 = jr.split(key)
@@ -52,17 +59,17 @@ class BlackBoxModel(eqx.Module):
         self.energy = ZeroPotential()
         self.entropy = ZeroPotential()
 
-    def vector_field(self, x):
+    def vector_field(self, x: State) -> State:
         z = standardise(x, self.shift, self.scale)
         return self.out(self.hidden(z)) * jnp.asarray(self.rate, x.dtype)
 
-    def terms(self, x) -> Terms:
+    def terms(self, x: State) -> Terms:
         # Expressed as Terms with L = I and grad E = f, so every pair loss applies unchanged.
         zero = jnp.zeros((), x.dtype)
         eye = jnp.eye(self.n, dtype=x.dtype)
         return Terms(zero, zero, self.vector_field(x), jnp.zeros_like(x), eye, 0.0 * eye)
 
-    def poisson_matrix(self, x):
+    def poisson_matrix(self, x: State) -> Matrix:
         return jnp.zeros((self.n, self.n), x.dtype)
 
 
@@ -103,7 +110,8 @@ class Reference:
 
 def train_reference(data: Trajectories, *, width: int = 64, depth: int = 2, steps: int = 3000,
                     learning_rate: float = 3e-3, batch_size: int = 256,
-                    validation: float = 0.2, seed: int = 0, dtype=None,
+                    validation: float = 0.2, seed: int = 0,
+                    dtype: DTypeLike | None = None,
                     progress: bool = False) -> Reference:
     """Train the black-box reference of :func:`metriplex.verdict.verdict` on
     ``1 - validation`` of the trajectories of ``data`` (split by ``seed``), in the data's own

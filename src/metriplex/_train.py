@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from typing import Any, Callable
 
 import equinox as eqx
@@ -104,18 +105,18 @@ def _rate_state(opt_state):
     return last if isinstance(hyper, dict) and "step_size" in hyper else None
 
 
-def is_adjustable(opt_state) -> bool:
+def is_adjustable(opt_state: optax.OptState) -> bool:
     """Whether ``opt_state`` belongs to an :func:`adjustable_optimizer`."""
     return _rate_state(opt_state) is not None
 
 
-def learning_rate_of(opt_state, default: float) -> float:
+def learning_rate_of(opt_state: optax.OptState, default: float) -> float:
     """The current rate of an :func:`adjustable_optimizer`'s state, else ``default``."""
     last = _rate_state(opt_state)
     return default if last is None else -float(last.hyperparams["step_size"])
 
 
-def with_learning_rate(opt_state, learning_rate: float):
+def with_learning_rate(opt_state: optax.OptState, learning_rate: float) -> optax.OptState:
     """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
     last = _rate_state(opt_state)
     old = last.hyperparams["step_size"]
@@ -123,8 +124,9 @@ def with_learning_rate(opt_state, learning_rate: float):
     return (*opt_state[:-1], last._replace(hyperparams=hyper))
 
 
-def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static, batch_size: int,
-               shard: Callable[[Batch], Batch] | None = None, noise=None):
+def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any, batch_size: int,
+               shard: Callable[[Batch], Batch] | None = None, noise: jax.Array | None = None,
+               ) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
     """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
     runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
     ``full_train`` (a :class:`~metriplex._pairs.PairStore` of all training pairs), and returns
@@ -170,7 +172,9 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static, batc
     return chunk
 
 
-def make_lbfgs_chunk(loss: Loss, static):
+def make_lbfgs_chunk(loss: Loss, static: Any) -> tuple[
+        optax.GradientTransformationExtraArgs,
+        Callable[..., tuple[Any, optax.OptState, jax.Array]]]:
     """The compiled unit of the L-BFGS finish: ``chunk(params, opt_state, length, pairs, key)``
     runs ``length`` iterations of :func:`optax.lbfgs` (zoom line search) on the loss of the
     fixed ``pairs`` (a deterministic objective: one batch, one key), and returns
@@ -231,7 +235,8 @@ class TrainState:
     history: History = dataclasses.field(default_factory=History)
 
     @classmethod
-    def start(cls, params, opt_state, key, lr: float) -> "TrainState":
+    def start(cls, params: Any, opt_state: optax.OptState, key: jax.Array,
+              lr: float) -> "TrainState":
         return cls(params=params, opt_state=opt_state, best_params=params,
                    restart_params=params, key=key, lr=float(lr))
 
@@ -239,7 +244,7 @@ class TrainState:
         return (self.params, self.opt_state, self.best_params, self.restart_params,
                 jr.key_data(self.key))
 
-    def save(self, path) -> None:
+    def save(self, path: str | os.PathLike) -> None:
         """Write the state to ``path`` atomically (JSON header + Equinox leaves)."""
         meta = dict(
             done=self.done, best_value=self.best_value, since_best=self.since_best,
@@ -249,7 +254,7 @@ class TrainState:
         )
         _checkpoint.save(path, self._arrays(), meta)
 
-    def load(self, path) -> "TrainState":
+    def load(self, path: str | os.PathLike) -> "TrainState":
         """The state saved at ``path``, read with this state's array structure."""
         (params, opt_state, best, restart, key_data), meta = _checkpoint.load(
             path, self._arrays())
@@ -262,8 +267,9 @@ class TrainState:
         )
 
 
-def check_arguments(*, steps, batch_size, eval_every, learning_rate, patience, lbfgs_steps,
-                    lbfgs_pairs, input_noise) -> None:
+def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_rate: float,
+                    patience: int | None, lbfgs_steps: int, lbfgs_pairs: int,
+                    input_noise: float) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
     if steps < 0 or batch_size < 1 or eval_every < 1:
         raise MetriplexError(
@@ -292,7 +298,7 @@ def spread(m: int, k: int) -> np.ndarray:
     return np.arange(m) if m <= k else np.linspace(0, m - 1, k).astype(int)
 
 
-def batch_sharding(enabled: bool, batch_size: int):
+def batch_sharding(enabled: bool, batch_size: int) -> Callable[[Batch], Batch] | None:
     """A function that shards a batch's sample axis over all local devices, or ``None``."""
     if not enabled:
         return None

@@ -5,10 +5,15 @@ the scales of the two potentials, in which every network and every loss term wor
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .data import Trajectories, time_scale
+
+if TYPE_CHECKING:
+    from .structure._abstract import AbstractFriction, AbstractPoisson, AbstractPotential
+    from .structure.scaling import Scaling
 
 
 @dataclasses.dataclass(frozen=True)
@@ -35,8 +40,9 @@ class Units:
     entropy: float = 1.0
 
     @classmethod
-    def from_data(cls, data: "Trajectories", *, poisson=None, entropy=None,
-                  friction=None) -> "Units":
+    def from_data(cls, data: "Trajectories", *, poisson: AbstractPoisson | None = None,
+                  entropy: AbstractPotential | None = None,
+                  friction: AbstractFriction | None = None) -> "Units":
         r"""The units of ``data``, with the potentials' scales chosen from the blocks that are
         **given** (pass the known ``poisson``, ``entropy`` or ``friction`` block; leave out
         those that are learned):
@@ -79,14 +85,14 @@ class Units:
         r"""Per-variable rate scale :math:`d_i/\tau`: the unit of every residual."""
         return np.asarray(self.scale) / self.time
 
-    def poisson_scaling(self):
+    def poisson_scaling(self) -> Scaling:
         r"""The :class:`~metriplex.Scaling` of a learned :math:`L`:
         :math:`L = D\tilde L D^\top/(\tau\sigma_E)`."""
         from .structure.scaling import Scaling
 
         return Scaling(self.shift, self.scale, 1.0 / (self.time * self.energy))
 
-    def friction_scaling(self):
+    def friction_scaling(self) -> Scaling:
         r"""The :class:`~metriplex.Scaling` of a learned :math:`M`:
         :math:`M = D\tilde M D^\top/(\tau\sigma_S)`."""
         from .structure.scaling import Scaling

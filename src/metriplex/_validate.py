@@ -6,6 +6,7 @@ the best model (:class:`RolloutCheck`, :func:`rollout_score`) and the plateau sc
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
 import numpy as np
@@ -13,6 +14,14 @@ import numpy as np
 from ._errors import MetriplexError
 from .data import Trajectories
 from .losses import Loss
+
+if TYPE_CHECKING:
+    import jax
+    from jax.typing import DTypeLike
+    from numpy.typing import ArrayLike
+
+    from ._model import GenericModel
+    from .integrate import AbstractScheme
 
 @dataclasses.dataclass(frozen=True)
 class Plateau:
@@ -67,7 +76,8 @@ class RolloutCheck:
                 f"trajectories={self.trajectories}."
             )
 
-    def prepare(self, valid: Trajectories, dtype):
+    def prepare(self, valid: Trajectories,
+                dtype: DTypeLike) -> tuple[jax.Array, jax.Array, np.ndarray]:
         """The padded windows ``(ts, xs, mask)`` that every check rolls out."""
         ids = valid.ids[: self.trajectories]
         ts, xs, lengths = valid.select(ids).padded()
@@ -80,7 +90,9 @@ class RolloutCheck:
 FAILED_ROLLOUT_SCORE = 1e3
 
 
-def rollout_score(model, scheme, windows, scale) -> tuple[float, int]:
+def rollout_score(model: GenericModel, scheme: AbstractScheme,
+                  windows: tuple[jax.Array, jax.Array, np.ndarray],
+                  scale: ArrayLike) -> tuple[float, int]:
     """``(score, failures)`` of :class:`RolloutCheck` for prepared ``windows``."""
     from .integrate import solve
 
@@ -101,7 +113,7 @@ def rollout_score(model, scheme, windows, scale) -> tuple[float, int]:
     return float(np.mean(scores)), int(np.sum(failed))
 
 
-def scheme_of(loss: Loss):
+def scheme_of(loss: Loss) -> AbstractScheme:
     """The scheme of the loss's residual term (Crank–Nicolson if it has none)."""
     from .integrate import CrankNicolson
     from .losses import SchemeResidual

@@ -10,11 +10,14 @@ Training pairs are consecutive rows of the same trajectory, each with its own ``
 from __future__ import annotations
 
 import dataclasses
-from typing import Iterator, NamedTuple, Sequence
+from typing import TYPE_CHECKING, Any, Iterator, NamedTuple, Sequence
 
 import numpy as np
 
 from ._errors import MetriplexError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, DTypeLike
 
 
 def state_scale(*parts: np.ndarray) -> np.ndarray:
@@ -78,7 +81,7 @@ def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -
     return float(np.exp(-np.mean(np.log(rate[moving]))))
 
 
-def uniform_times(trajectory, dt: float) -> np.ndarray:
+def uniform_times(trajectory: ArrayLike, dt: float) -> np.ndarray:
     r"""The uniform time grid :math:`t = k\,\Delta t` of each row: ``k`` counts the rows of the
     same trajectory id before it, in file order (what ``--dt`` gives instead of a file's own
     times)."""
@@ -94,7 +97,7 @@ def uniform_times(trajectory, dt: float) -> np.ndarray:
     return k * float(dt)
 
 
-def check_time_step(dt, option: str = "dt") -> float:
+def check_time_step(dt: Any, option: str = "dt") -> float:
     """A time step: a positive finite number."""
     if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)) \
             or not (np.isfinite(dt) and dt > 0):
@@ -219,7 +222,8 @@ class Trajectories:
         return cls(np.concatenate(ids), np.concatenate(ts), np.concatenate(xs), tuple(names))
 
     @classmethod
-    def from_arrays(cls, ts: np.ndarray, xs: np.ndarray, names: Sequence[str] = ()):
+    def from_arrays(cls, ts: np.ndarray, xs: np.ndarray,
+                    names: Sequence[str] = ()) -> "Trajectories":
         """From a shared grid ``ts`` (T,) or per-trajectory grids (K, T) and ``xs`` (K, T, n)."""
         xs = np.asarray(xs)
         ts = np.broadcast_to(np.asarray(ts, dtype=np.float64), xs.shape[:2])
@@ -253,7 +257,7 @@ class Trajectories:
         m = np.isin(self.trajectory, np.asarray(ids))
         return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
 
-    def pairs(self, dtype=None) -> Pairs:
+    def pairs(self, dtype: DTypeLike | None = None) -> Pairs:
         """Consecutive rows of the same trajectory, each with its own ``dt``; states in
         ``dtype`` (default: float64, as stored; float32 halves the memory of large data)."""
         same = self.trajectory[1:] == self.trajectory[:-1]

@@ -37,7 +37,7 @@ ROLLOUT_BATCHES = 10
 
 
 def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractScheme | None = None,
-                 progress: bool = False):
+                 progress: bool = False) -> tuple[Rollout, np.ndarray, np.ndarray]:
     """Roll ``model`` out from each trajectory's first state on its own grid (ragged-safe).
 
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
@@ -194,7 +194,7 @@ def evaluate(
     *,
     scheme: AbstractScheme | None = None,
     horizon: float | None = None,
-    rollout=None,
+    rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
     progress: bool = False,
 ) -> dict[str, Any]:
     """Metrics of ``model`` on ``data`` (see the module docstring); a JSON-able dict.
@@ -356,7 +356,8 @@ def error_over_time(pred: np.ndarray, obs: np.ndarray) -> np.ndarray:
         return np.linalg.norm(pred - obs, axis=-1) / scale
 
 
-def time_to_error(ts: np.ndarray, pred: np.ndarray, obs: np.ndarray, threshold: float = 0.1):
+def time_to_error(ts: np.ndarray, pred: np.ndarray, obs: np.ndarray,
+                  threshold: float = 0.1) -> float:
     """First time at which the relative error exceeds ``threshold`` (``inf`` if never)."""
     err = error_over_time(pred, obs)
     above = np.flatnonzero(~(err <= threshold))

@@ -28,6 +28,7 @@ import jax.random as jr
 
 from ._errors import MetriplexError
 from ._model import GenericModel, Terms
+from ._types import Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
 
 
@@ -55,7 +56,8 @@ class AbstractLossTerm(eqx.Module):
         return False
 
     @abc.abstractmethod
-    def __call__(self, model: GenericModel, batch: Batch, ctx: Context, key) -> jax.Array: ...
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
+                 key: jax.Array) -> jax.Array: ...
 
     def as_loss(self) -> "Loss":
         return Loss((self,), (1.0,))
@@ -105,7 +107,8 @@ class Loss(eqx.Module):
     def names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.terms)
 
-    def __call__(self, model: GenericModel, batch: Batch, *, key=None):
+    def __call__(self, model: GenericModel, batch: Batch, *,
+                 key: jax.Array | None = None) -> tuple[jax.Array, dict[str, jax.Array]]:
         # One evaluation over both states of every pair: twice-as-tall matmuls and half as
         # many kernels as two separate vmaps (see docs/performance.md).
         # Terms nobody reads (e.g. gradients at the states when only the discrete-gradient
@@ -151,7 +154,8 @@ class SchemeResidual(AbstractLossTerm):
         # those terms from the shared context lets midpoint penalties reuse them.
         return isinstance(self.scheme, DiscreteGradient)
 
-    def __call__(self, model, batch, ctx, key):
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
+                 key: jax.Array) -> jax.Array:
         args = (model, batch.x0, batch.x1, batch.dt, ctx.terms0, ctx.terms1)
         if self.needs_midpoints:
             r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(*args, ctx.mid)
@@ -181,7 +185,8 @@ class _Degeneracy(AbstractLossTerm):
     @staticmethod
     def _defect(t: Terms) -> jax.Array: ...
 
-    def __call__(self, model, batch, ctx, key):
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
+                 key: jax.Array) -> jax.Array:
         if self.where == "midpoints":
             return _sq(self._defect(ctx.mid), batch.scale)
         return 0.5 * (_sq(self._defect(ctx.terms0), batch.scale)
@@ -237,7 +242,7 @@ def DegeneracyPenalty(where: str = "states") -> Loss:
     return PoissonDegeneracy(where) + FrictionDegeneracy(where)
 
 
-def stochastic_jacobi(model: GenericModel, x, u, v, w):
+def stochastic_jacobi(model: GenericModel, x: State, u: State, v: State, w: State) -> Scalar:
     r"""The Jacobi trilinear form :math:`J(u, v, w) = \sum J^{ijl}u_iv_jw_l` from three
     directional derivatives of :math:`L`:
 
@@ -288,7 +293,8 @@ class JacobiPenalty(AbstractLossTerm):
                 f"{self.samples}."
             )
 
-    def __call__(self, model, batch, ctx, key):
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
+                 key: jax.Array) -> jax.Array:
         x = batch.x0
         if self.samples is not None and self.samples < x.shape[0]:
             # Every k-th pair: a random subset of a random training batch, and still spread

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -44,13 +45,18 @@ from .data import Pairs, Trajectories, state_scale, time_scale
 from .integrate import model_size
 from .losses import CrankNicolsonResidual, Loss
 
+if TYPE_CHECKING:
+    import jax
+    from jax.typing import DTypeLike
+    from numpy.typing import ArrayLike
+
 __all__ = ["History", "Plateau", "RolloutCheck", "adjustable_optimizer", "default_optimizer",
            "fit"]
 
 
 def fit(
     model: GenericModel,
-    data,
+    data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],
     *,
     loss: Loss | None = None,
     optimizer: optax.GradientTransformation | None = None,
@@ -64,8 +70,8 @@ def fit(
     rollout_check: RolloutCheck | None = RolloutCheck(),
     patience: int | None = None,
     max_seconds: float | None = None,
-    scale=None,
-    dtype=None,
+    scale: ArrayLike | None = None,
+    dtype: DTypeLike | None = None,
     progress: bool = True,
     seed_split: int = 0,
     checkpoint: str | None = None,
@@ -75,7 +81,7 @@ def fit(
     lbfgs_steps: int = 0,
     lbfgs_pairs: int = 8192,
     input_noise: float = 0.0,
-    key,
+    key: jax.Array,
 ) -> tuple[GenericModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
 

@@ -103,7 +103,7 @@ another entropy might exist.
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -114,6 +114,9 @@ from ._model import GenericModel, float_dtype
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          train_reference)
 from .data import Trajectories, state_scale, time_scale
+
+if TYPE_CHECKING:
+    from .integrate import AbstractScheme
 
 __all__ = ["CANNOT_TELL", "CONSISTENT", "EXIT_STATUS", "NOT_CONSISTENT", "BlackBoxModel",
            "Reference", "Thresholds", "train_reference", "verdict"]
@@ -165,7 +168,7 @@ def verdict(
     report: dict[str, Any] | None = None,
     converged: bool | None = None,
     stopped: str | None = None,
-    scheme=None,
+    scheme: AbstractScheme | None = None,
     reference: Reference | None = None,
     width: int = 64,
     depth: int = 2,

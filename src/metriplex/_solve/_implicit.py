@@ -4,14 +4,15 @@ fallback) and the step built on them."""
 from __future__ import annotations
 
 import abc
-from typing import Any
+from typing import Any, Callable
 
 import jax
 import jax.numpy as jnp
 import optimistix as optx
 
 from .._errors import MetriplexError
-from .._types import State
+from .._model import GenericModel
+from .._types import Scalar, State, States
 from ._scheme import AbstractScheme, _tolerance
 
 
@@ -22,7 +23,8 @@ class _FixedPointIteration(optx.FixedPointIteration):
     a float32 state then changes the loop carry's dtype and the solve fails to trace.
     """
 
-    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
+    def init(self, fn: Callable[..., Any], y: State, args: Any, options: dict[str, Any],
+             f_struct: Any, aux_struct: Any, tags: frozenset[object]) -> Any:
         state = super().init(fn, y, args, options, f_struct, aux_struct, tags)
         return type(state)(jnp.array(jnp.inf, jnp.result_type(y)))
 
@@ -78,15 +80,15 @@ class _Implicit(AbstractScheme):
                 f"solver must be one of {', '.join(SOLVERS)}; got {self.solver!r}."
             )
 
-    def start(self, model, x0) -> Any:
+    def start(self, model: GenericModel, x0: State) -> Any:
         """The part of the average that depends on ``x0`` alone (default: nothing)."""
         return None
 
     @abc.abstractmethod
-    def average(self, model, x0, x1, start) -> State:
+    def average(self, model: GenericModel, x0: State, x1: State, start: Any) -> State:
         """The scheme's average of the vector field over the step, ``(x1 - x0)/dt``."""
 
-    def increment(self, model, x0, x1) -> State:
+    def increment(self, model: GenericModel, x0: State, x1: State) -> State:
         return self.average(model, x0, x1, self.start(model, x0))
 
     def _newton(self, model, x, dt, guess, pre):
@@ -114,11 +116,13 @@ class _Implicit(AbstractScheme):
         sol = optx.fixed_point(fn, solver, guess, (x, dt, pre), max_steps=steps, throw=False)
         return _outcome(sol)
 
-    def step(self, model, x, dt, guess):
+    def step(self, model: GenericModel, x: State, dt: Scalar | float,
+             guess: State) -> tuple[State, jax.Array, jax.Array]:
         y, ok, its = self.step_batch(model, x[None], jnp.asarray(dt)[None], guess[None])
         return y[0], ok[0], its[0]
 
-    def step_batch(self, model, x, dt, guess):
+    def step_batch(self, model: GenericModel, x: States, dt: jax.Array,
+                   guess: States) -> tuple[States, jax.Array, jax.Array]:
         # What depends on x0 alone is computed once, for both solvers.
         pre = jax.vmap(lambda x: self.start(model, x))(x)
         newton = jax.vmap(lambda *a: self._newton(model, *a))

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 
 from .._model import GenericModel, Terms
-from .._types import State
+from .._types import Scalar, State, States
 
 
 
@@ -30,12 +30,15 @@ class AbstractScheme(eqx.Module):
     summary: eqx.AbstractClassVar[str]
 
     @abc.abstractmethod
-    def step(self, model: GenericModel, x: State, dt, guess: State):
+    def step(self, model: GenericModel, x: State, dt: Scalar | float,
+             guess: State) -> tuple[State, jax.Array, jax.Array]:
         """Return ``(x_next, converged, iterations)``."""
 
-    def step_batch(self, model: GenericModel, x, dt, guess):
+    def step_batch(self, model: GenericModel, x: States, dt: jax.Array,
+                   guess: States) -> tuple[States, jax.Array, jax.Array]:
         """:meth:`step` for a batch of states ``x`` ``(B, n)``, steps ``dt`` ``(B,)``."""
         return jax.vmap(lambda x, dt, g: self.step(model, x, dt, g))(x, dt, guess)
 
     @abc.abstractmethod
-    def residual(self, model, x0, x1, dt, terms0: Terms, terms1: Terms) -> State: ...
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms) -> State: ...

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-
+from .._model import GenericModel, Terms
+from .._types import Scalar, State
 from ._implicit import _Implicit
 
 
@@ -15,11 +16,12 @@ class CrankNicolson(_Implicit):
     name: ClassVar[str] = "cn"
     summary: ClassVar[str] = "Crank-Nicolson, the paper's scheme"
 
-    def start(self, model, x0):
+    def start(self, model: GenericModel, x0: State) -> State:
         return model.vector_field(x0)
 
-    def average(self, model, x0, x1, start):
+    def average(self, model: GenericModel, x0: State, x1: State, start: State) -> State:
         return 0.5 * (start + model.vector_field(x1))
 
-    def residual(self, model, x0, x1, dt, terms0, terms1):
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms) -> State:
         return (x1 - x0) / dt - 0.5 * (terms0.vector_field + terms1.vector_field)

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model import GenericModel, Terms
+from .._types import Scalar, State
 from ._implicit import _Implicit
 
 
@@ -17,7 +18,8 @@ def _sum(a):
     return jnp.sum(a, axis=-1)
 
 
-def discrete_gradient(grad_mid, value0, value1, x0, x1):
+def discrete_gradient(grad_mid: State, value0: Scalar, value1: Scalar, x0: State,
+                      x1: State) -> State:
     r"""Gonzalez's midpoint discrete gradient of a scalar :math:`F` between ``x0`` and ``x1``.
 
     .. math::
@@ -54,7 +56,7 @@ def discrete_gradient(grad_mid, value0, value1, x0, x1):
     return grad_mid + (defect / (_sum(d * d) + delta2)) * d
 
 
-def project_out(g, v):
+def project_out(g: State, v: State) -> State:
     r""":math:`v - g\,\frac{g\cdot v}{|g|^2 + \tau}`: ``v`` with its component along ``g``
     removed (the projector :math:`I - gg^\top/|g|^2`, symmetric and idempotent).
 
@@ -66,8 +68,9 @@ def project_out(g, v):
     return v - g * (_sum(g * v) / (_sum(g * g) + tau))
 
 
-def discrete_generic_field(model: GenericModel, x0, x1, energy0, energy1, entropy0, entropy1,
-                           mid: Terms | None = None):
+def discrete_generic_field(model: GenericModel, x0: State, x1: State, energy0: Scalar,
+                           energy1: Scalar, entropy0: Scalar, entropy1: Scalar,
+                           mid: Terms | None = None) -> State:
     r"""The discrete-gradient GENERIC average :math:`\bar L\bar\nabla E + \bar M\bar\nabla S`.
 
     With :math:`\bar\nabla E,\ \bar\nabla S` the discrete gradients of
@@ -120,16 +123,18 @@ class DiscreteGradient(_Implicit):
     name: ClassVar[str] = "discrete-gradient"
     summary: ClassVar[str] = "keeps any learned E exactly and dS >= 0"
 
-    def start(self, model, x0):
+    def start(self, model: GenericModel, x0: State) -> tuple[Scalar, Scalar]:
         return model.energy(x0), model.entropy(x0)
 
-    def average(self, model, x0, x1, start):
+    def average(self, model: GenericModel, x0: State, x1: State,
+                start: tuple[Scalar, Scalar]) -> State:
         energy0, entropy0 = start
         return discrete_generic_field(
             model, x0, x1, energy0, model.energy(x1), entropy0, model.entropy(x1)
         )
 
-    def residual(self, model, x0, x1, dt, terms0, terms1, mid: Terms | None = None):
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms, mid: Terms | None = None) -> State:
         field = discrete_generic_field(
             model, x0, x1, terms0.energy, terms1.energy, terms0.entropy, terms1.entropy, mid
         )

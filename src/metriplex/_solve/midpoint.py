@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
-
+from .._model import GenericModel, Terms
+from .._types import Scalar, State
 from ._implicit import _Implicit
 
 
@@ -15,10 +16,11 @@ class ImplicitMidpoint(_Implicit):
     name: ClassVar[str] = "midpoint"
     summary: ClassVar[str] = "implicit midpoint: keeps a quadratic E"
 
-    def average(self, model, x0, x1, start):
+    def average(self, model: GenericModel, x0: State, x1: State, start: Any) -> State:
         return model.vector_field(0.5 * (x0 + x1))
 
-    def residual(self, model, x0, x1, dt, terms0, terms1):
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms) -> State:
         return (x1 - x0) / dt - model.vector_field(0.5 * (x0 + x1))
 
 

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import jax
 import jax.numpy as jnp
 
+from .._model import GenericModel, Terms
+from .._types import Scalar, State
 from ._scheme import AbstractScheme
 
 
@@ -15,7 +18,7 @@ class RK4(AbstractScheme):
     name: ClassVar[str] = "rk4"
     summary: ClassVar[str] = "explicit, fourth order: no implicit solve"
 
-    def advance(self, model, x, dt):
+    def advance(self, model: GenericModel, x: State, dt: Scalar | float) -> State:
         f = model.vector_field
         k1 = f(x)
         k2 = f(x + 0.5 * dt * k1)
@@ -23,9 +26,11 @@ class RK4(AbstractScheme):
         k4 = f(x + dt * k3)
         return x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
 
-    def step(self, model, x, dt, guess):
+    def step(self, model: GenericModel, x: State, dt: Scalar | float,
+             guess: State) -> tuple[State, jax.Array, jax.Array]:
         y = self.advance(model, x, dt)
         return y, jnp.all(jnp.isfinite(y)), jnp.array(0)
 
-    def residual(self, model, x0, x1, dt, terms0, terms1):
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms) -> State:
         return (x1 - self.advance(model, x0, dt)) / dt

@@ -6,6 +6,7 @@ strings are read in :mod:`metriplex.app.config`; this module turns checked setti
 
 from __future__ import annotations
 
+import jax
 import jax.random as jr
 
 from .._model import GenericModel
@@ -39,7 +40,7 @@ def units_for(config: RunConfig, data: Trajectories) -> Units:
                            friction=_known_friction(config, n))
 
 
-def build_model(config: RunConfig, data: Trajectories, *, key,
+def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                 units: Units | None = None) -> GenericModel:
     """The untrained model that ``config`` describes, in the natural ``units`` of ``data``
     (default :func:`units_for`): networks see standardised states, and their outputs are scaled

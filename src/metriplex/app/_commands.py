@@ -10,8 +10,12 @@ import dataclasses
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
+
+if TYPE_CHECKING:
+    import argparse
 
 
 def _config_from_args(args):
@@ -48,7 +52,7 @@ def _positive_finite(value, option: str) -> None:
         raise MetriplexError(f"{option} must be a positive finite number; got {value}.")
 
 
-def cmd_simulate(args) -> None:
+def cmd_simulate(args: argparse.Namespace) -> None:
     from .. import systems
     from .config import check_seed
     from ..io import write
@@ -101,7 +105,7 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
     return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
-def cmd_train(args) -> None:
+def cmd_train(args: argparse.Namespace) -> None:
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from .config import validate
@@ -147,7 +151,7 @@ def cmd_train(args) -> None:
         return 130
 
 
-def cmd_rollout(args) -> None:
+def cmd_rollout(args: argparse.Namespace) -> None:
     import numpy as np
 
     from ..data import Trajectories
@@ -260,7 +264,7 @@ def _scheme(args) -> str:
     return run_config(args.run).get("config", {}).get("scheme", "cn")
 
 
-def cmd_evaluate(args) -> None:
+def cmd_evaluate(args: argparse.Namespace) -> None:
     import json
 
     from ..io import check_output_file, check_output_folder, load, write_json
@@ -317,7 +321,7 @@ def cmd_evaluate(args) -> None:
         return EXIT_STATUS[metrics["verdict"]["outcome"]]
 
 
-def cmd_reproduce(args) -> None:
+def cmd_reproduce(args: argparse.Namespace) -> None:
     from ._lock import RunLock
     from .experiments import default_out, run_experiment
     from .runs import check_run_folder

@@ -149,7 +149,7 @@ class RunLock:
     when another process holds the folder; a stale lock is taken over, and ``note`` says so.
     """
 
-    def __init__(self, folder: str | os.PathLike):
+    def __init__(self, folder: str | os.PathLike) -> None:
         self.folder = Path(folder)
         self.path = self.folder / LOCK_NAME
         self.note: str | None = None

@@ -7,12 +7,17 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
 from .._errors import MetriplexError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 #: How ``--trajectories`` and ``--validation-ids`` are written.
@@ -31,7 +36,7 @@ class TrajectoryIds:
     source: str
 
     @classmethod
-    def of(cls, ids, source: str) -> "TrajectoryIds":
+    def of(cls, ids: Iterable[int], source: str) -> "TrajectoryIds":
         """From integer ids (any order, repeats allowed)."""
         ranges: list[list[int]] = []
         for i in sorted({int(i) for i in ids}):
@@ -53,7 +58,7 @@ class TrajectoryIds:
                if max(a, c) <= min(b, d)]
         return _merged(tuple(out), f"{self.source} and {other.source}")
 
-    def pick(self, available, where: str) -> np.ndarray:
+    def pick(self, available: ArrayLike, where: str) -> np.ndarray:
         """The ids of ``available`` (the data's ids) in this set; every id of the set must be
         there, else a message names the first missing ones, ``where`` (the data) and its ids."""
         available = np.unique(np.asarray(available, dtype=np.int64))
@@ -95,7 +100,7 @@ def _merged(ranges, source: str) -> TrajectoryIds:
     return TrajectoryIds(tuple((a, b) for a, b in out), source)
 
 
-def format_ids(ids, limit: int = 8) -> str:
+def format_ids(ids: TrajectoryIds | ArrayLike, limit: int = 8) -> str:
     """Ids (or a :class:`TrajectoryIds`) in the ``--trajectories`` syntax (``0-3,7,9-12``);
     past ``limit`` pieces the rest is elided, with a count."""
     ranges = ids.ranges if isinstance(ids, TrajectoryIds) else TrajectoryIds.of(
@@ -155,7 +160,8 @@ def _split_list(value, key: str, where: str) -> TrajectoryIds:
     return TrajectoryIds.of(value, source)
 
 
-def read_split(path, option: str = "--split") -> tuple[TrajectoryIds, TrajectoryIds]:
+def read_split(path: str | os.PathLike,
+               option: str = "--split") -> tuple[TrajectoryIds, TrajectoryIds]:
     """``(train, validation)`` ids from a split file: a JSON object with lists ``train`` and
     ``validation`` (optionally ``test``, which must not overlap them), or a run folder (or its
     ``config.json``), whose ``train_trajectories`` and ``validation_trajectories`` are reused
@@ -231,7 +237,7 @@ def _disjoint(a: TrajectoryIds, b: TrajectoryIds, key_a: str, key_b: str, where:
 
 
 def choose_trajectories(
-    data_ids, where: str, selection: tuple[TrajectoryIds | None, TrajectoryIds | None],
+    data_ids: ArrayLike, where: str, selection: tuple[TrajectoryIds | None, TrajectoryIds | None],
 ) -> tuple[np.ndarray | None, np.ndarray | None]:
     """The ids that a :func:`check_selection` ``selection`` picks from the data's ids (``where``
     names the data in messages): ``(trajectories, validation_ids)`` for
@@ -254,7 +260,9 @@ def choose_trajectories(
     return selected, valid
 
 
-def check_selection(*, trajectories=None, validation_ids=None, split=None, validation=None):
+def check_selection(*, trajectories: str | None = None, validation_ids: str | None = None,
+                    split: str | os.PathLike | None = None, validation: float | None = None,
+                    ) -> tuple[TrajectoryIds | None, TrajectoryIds | None]:
     """The selection options parsed and checked against each other, before any data are
     read: ``(selected, validation)`` :class:`TrajectoryIds`, each ``None`` when not given."""
     if split is not None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from typing import Any, NoReturn
 
 from ._commands import (_config_from_args, _train_summary, cmd_evaluate, cmd_reproduce,
                         cmd_rollout, cmd_simulate, cmd_train)
@@ -47,11 +48,11 @@ class _Parser(argparse.ArgumentParser):
     """argparse, with negative numbers in any notation as values, and usage errors as one line
     (the rule and the value, and where to look) instead of the whole usage text."""
 
-    def __init__(self, *args, **kwargs):
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}. See `{self.prog} --help`.\n")
 
 

@@ -243,7 +243,7 @@ FLOAT_FIELDS = ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "lr", 
 SEED_BOUND = 2**32
 
 
-def check_seed(seed, option: str = "--seed") -> int:
+def check_seed(seed: Any, option: str = "--seed") -> int:
     """A PRNG seed: an integer in ``[0, 2**32)``."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
             or not 0 <= seed < SEED_BOUND:
@@ -387,7 +387,7 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def preset(name: str, **overrides) -> RunConfig:
+def preset(name: str, **overrides: Any) -> RunConfig:
     if name not in PRESETS:
         raise MetriplexError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}.")
     return RunConfig(**{**PRESETS[name], **overrides})

@@ -6,7 +6,7 @@ calls ``plt.show()``. :func:`save_figure` writes PNG and PDF with the raw number
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import matplotlib
 
@@ -14,8 +14,15 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from numpy.typing import ArrayLike
 
-def save_figure(fig, stem: str | Path, **raw) -> list[Path]:
+    from .._train import History
+
+
+def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
     """Write ``stem.png``, ``stem.pdf`` and the raw data ``stem.npz``; return the paths."""
     from ..io import atomic_write
 
@@ -138,7 +145,7 @@ def _per_variable_lines(ax, ts, per_variable: dict, max_labels: int, ceiling=Non
     return len(named) + (1 if rest else 0)
 
 
-def loss_curves(history, ax=None):
+def loss_curves(history: History, ax: Axes | None = None) -> Figure:
     """Training and validation loss terms against the optimiser step (log scale)."""
     fig, ax = _axes(ax)
     steps = np.asarray(history.step)
@@ -157,8 +164,9 @@ def loss_curves(history, ax=None):
     return fig
 
 
-def trajectories(ts, pred, obs, names: Sequence[str], *, truth_label="observed",
-                 model_label="learned", max_vars: int = 12, failed_at: float | None = None):
+def trajectories(ts: np.ndarray, pred: np.ndarray, obs: np.ndarray, names: Sequence[str], *,
+                 truth_label: str = "observed", model_label: str = "learned", max_vars: int = 12,
+                 failed_at: float | None = None) -> Figure:
     """Each state variable against time: the model's rollout over the observed trajectory.
 
     Up to ``max_vars`` variables (the title says how many are shown); ``failed_at``: the time
@@ -192,7 +200,8 @@ def trajectories(ts, pred, obs, names: Sequence[str], *, truth_label="observed",
     return fig
 
 
-def positions(pred, obs, ax=None, *, upto: int | None = None, horizon_label: str = ""):
+def positions(pred: np.ndarray, obs: np.ndarray, ax: Axes | None = None, *,
+              upto: int | None = None, horizon_label: str = "") -> Figure:
     """Pendulum: paths of the two masses in the plane, learned against true.
 
     With ``upto``, the states ``[:upto]`` (e.g. up to the reported horizon) are drawn in full
@@ -218,7 +227,9 @@ def positions(pred, obs, ax=None, *, upto: int | None = None, horizon_label: str
     return fig
 
 
-def energy_entropy(ts, E, S, *, E_true=None, S_true=None, failed_at: float | None = None):
+def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
+                   E_true: np.ndarray | None = None, S_true: np.ndarray | None = None,
+                   failed_at: float | None = None) -> Figure:
     """Energy and entropy along a rollout (learned potentials; true ones if known).
 
     ``failed_at``: the time at which the rollout failed; the potentials stop there."""
@@ -243,8 +254,10 @@ def energy_entropy(ts, E, S, *, E_true=None, S_true=None, failed_at: float | Non
     return fig
 
 
-def error_over_time(ts, err, *, reference=None, per_variable=None, failed_at=None, ax=None,
-                    max_labels: int = MAX_LABELS):
+def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | None = None,
+                    per_variable: dict[str, np.ndarray] | None = None,
+                    failed_at: float | None = None, ax: Axes | None = None,
+                    max_labels: int = MAX_LABELS) -> Figure:
     """Relative rollout error against time (log scale), with a reference scheme's if given and
     each variable's error (divided by its data scale) as thin lines.
 
@@ -281,8 +294,10 @@ def error_over_time(ts, err, *, reference=None, per_variable=None, failed_at=Non
     return fig
 
 
-def rollout_errors(ts, errors, *, failed_step=None, per_variable=None, trajectory=None,
-                   ids=None, max_labels: int = MAX_LABELS):
+def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike | None = None,
+                   per_variable: dict[str, np.ndarray] | None = None,
+                   trajectory: int | None = None, ids: Sequence[int] | None = None,
+                   max_labels: int = MAX_LABELS) -> Figure:
     """Rollout errors of every trajectory, and per variable of one, against time (log scale).
 
     ``ts``, ``errors``: ``(K, T)`` arrays (padded; NaN where a rollout stopped or a trajectory
@@ -345,7 +360,8 @@ def rollout_errors(ts, errors, *, failed_step=None, per_variable=None, trajector
     return fig
 
 
-def gauge_fit(true_vals, learned_vals, *, label: str, ax=None):
+def gauge_fit(true_vals: ArrayLike, learned_vals: ArrayLike, *, label: str,
+              ax: Axes | None = None) -> Figure:
     """Learned potential against the true one after the best affine fit (a scatter)."""
     fig, ax = _axes(ax, (4.5, 4.5))
     a, b = np.polyfit(true_vals, learned_vals, 1)
@@ -359,8 +375,8 @@ def gauge_fit(true_vals, learned_vals, *, label: str, ax=None):
     return fig
 
 
-def residual_over_time(ts, residual, names: Sequence[str], ax=None,
-                       max_labels: int = MAX_LABELS):
+def residual_over_time(ts: np.ndarray, residual: np.ndarray, names: Sequence[str],
+                       ax: Axes | None = None, max_labels: int = MAX_LABELS) -> Figure:
     """The scheme residual of each observed pair against time, per variable (log scale); with
     many variables the ``max_labels`` largest are named, in a legend outside the axes."""
     many = len(names) > max_labels

@@ -13,6 +13,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -32,6 +33,13 @@ from ..diagnostics import error_over_time, evaluate, rollout_data
 from ..integrate import scheme_from_name
 from ..io import check_output_folder, save, write_json
 from ..train import fit
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from .._model import GenericModel
+    from .._train import History
+    from ..integrate import Rollout
 
 
 def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool = False) -> None:
@@ -67,10 +75,10 @@ def train_run(
     overwrite: bool = False,
     resume: bool = False,
     progress: bool = True,
-    trajectories=None,
-    validation_ids=None,
+    trajectories: ArrayLike | None = None,
+    validation_ids: ArrayLike | None = None,
     source: dict | None = None,
-):
+) -> tuple[GenericModel, History, Trajectories, Trajectories | None, float]:
     """Train a model described by ``config`` on ``data`` and fill the run folder ``out``.
 
     ``trajectories``: the ids of ``data`` to use (default all). ``validation_ids``: the ids of
@@ -90,8 +98,10 @@ def train_run(
                           validation_ids=validation_ids, source=source)
 
 
-def split_trajectories(data: Trajectories, config: RunConfig, *, trajectories=None,
-                       validation_ids=None) -> tuple[Trajectories, Trajectories | None]:
+def split_trajectories(data: Trajectories, config: RunConfig, *,
+                       trajectories: ArrayLike | None = None,
+                       validation_ids: ArrayLike | None = None,
+                       ) -> tuple[Trajectories, Trajectories | None]:
     """``(train, validation)`` of :func:`train_run` (see its ``trajectories`` and
     ``validation_ids``); ids that ``data`` lack, or no trajectory left to train, are refused."""
     if trajectories is not None:
@@ -272,7 +282,7 @@ def training_outcome(run_dir: str | Path) -> dict:
             "stopped": stopped if isinstance(stopped, str) and stopped else None}
 
 
-def check_names(run_dir, data: Trajectories) -> None:
+def check_names(run_dir: str | Path, data: Trajectories) -> None:
     """The data must have the columns the model was trained on, in the same order."""
     from ..io import read_header
 
@@ -293,7 +303,8 @@ def check_names(run_dir, data: Trajectories) -> None:
         )
 
 
-def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path | None = None,
+def evaluate_run(model: GenericModel, data: Trajectories, *, scheme: str = "cn",
+                 figures: Path | None = None,
                  horizon: float | None = None, solver: str | None = None,
                  progress: bool = False) -> dict:
     """Metrics on ``data`` and, if ``figures`` is given, the standard figure set; the
@@ -308,8 +319,10 @@ def evaluate_run(model, data: Trajectories, *, scheme: str = "cn", figures: Path
     return report
 
 
-def report_figures(model, data: Trajectories, folder: Path, *, scheme: str = "cn", k: int = 0,
-                   solver: str | None = None, rollout=None, progress: bool = False):
+def report_figures(model: GenericModel, data: Trajectories, folder: Path, *, scheme: str = "cn",
+                   k: int = 0, solver: str | None = None,
+                   rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
+                   progress: bool = False) -> None:
     """The report figure set: every trajectory's rollout error over time (failed rollouts
     marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair

@@ -58,7 +58,7 @@ def _found(variables: dict) -> str:
 
 
 class _Unsupported:
-    def __init__(self, cls: str):
+    def __init__(self, cls: str) -> None:
         self.cls = cls
 
     def __repr__(self):

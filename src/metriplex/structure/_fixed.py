@@ -9,7 +9,7 @@ for the constant ones, checks its numbers (antisymmetric :math:`L`, symmetric PS
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable, Self
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -17,6 +17,10 @@ import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Matrix, State
+
+if TYPE_CHECKING:
+    import jax
+    from numpy.typing import ArrayLike
 
 
 class AbstractZeroMatrix(eqx.Module):
@@ -27,11 +31,11 @@ class AbstractZeroMatrix(eqx.Module):
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
         return jnp.zeros((self.n, self.n), x.dtype)
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "zero"}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
         return cls(n)
 
 
@@ -53,15 +57,15 @@ class AbstractConstantMatrix(eqx.Module):
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
         return jnp.asarray(self.matrix, x.dtype)
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "constant", "matrix": [list(r) for r in self.matrix]}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
         return cls(spec["matrix"])
 
 
-def square_matrix(matrix, what: str) -> np.ndarray:
+def square_matrix(matrix: ArrayLike, what: str) -> np.ndarray:
     """``matrix`` as a finite square float64 array, or an error naming ``what``."""
     a = np.asarray(matrix, dtype=np.float64)
     if a.ndim != 2 or a.shape[0] != a.shape[1] or a.shape[0] < 1:

@@ -9,6 +9,7 @@ never by a gather or scatter per sample: XLA's CPU backward of gathers costs ~30
 from __future__ import annotations
 
 import functools
+from typing import Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -17,9 +18,10 @@ import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
+from .._types import Matrix
 
 @jax.custom_jvp
-def softplus(z):
+def softplus(z: jax.Array) -> jax.Array:
     r"""``jax.nn.softplus`` (same values) with the derivative :math:`\sigma(z)` as its rule.
 
     ``jax.nn.softplus`` differentiates through ``logaddexp``, whose rule costs two
@@ -44,7 +46,7 @@ ACTIVATIONS = {
 }
 
 
-def activation_fn(name: str):
+def activation_fn(name: str) -> Callable[[jax.Array], jax.Array]:
     if name not in ACTIVATIONS:
         raise MetriplexError(
             f"activation must be one of {sorted(ACTIVATIONS)} (all C^inf, as GENERIC needs "
@@ -59,7 +61,8 @@ class Hidden(eqx.Module):
     layers: tuple[eqx.nn.Linear, ...]
     activation: str = eqx.field(static=True)
 
-    def __init__(self, in_size: int, width: int, depth: int, activation: str, *, key):
+    def __init__(self, in_size: int, width: int, depth: int, activation: str, *,
+                 key: jax.Array) -> None:
         if width < 1 or depth < 1:
             raise MetriplexError(
                 f"network width and depth must be >= 1; got width={width}, depth={depth}."
@@ -72,14 +75,15 @@ class Hidden(eqx.Module):
         )
         self.activation = activation
 
-    def __call__(self, z):
+    def __call__(self, z: jax.Array) -> jax.Array:
         act = activation_fn(self.activation)
         for layer in self.layers:
             z = act(layer(z))
         return z
 
 
-def standardise(x, shift: tuple[float, ...] | None, scale: tuple[float, ...] | None):
+def standardise(x: jax.Array, shift: tuple[float, ...] | None,
+                scale: tuple[float, ...] | None) -> jax.Array:
     if shift is None:
         return x
     return (x - jnp.asarray(shift, x.dtype)) / jnp.asarray(scale, x.dtype)
@@ -144,7 +148,8 @@ class FoldedHead(eqx.Module):
     triangle: str = eqx.field(static=True)
     row_scale: tuple[float, ...] | None = eqx.field(static=True)
 
-    def __init__(self, width: int, n: int, triangle: str, row_scale, init_scale: float, *, key):
+    def __init__(self, width: int, n: int, triangle: str, row_scale: Sequence[float] | None,
+                 init_scale: float, *, key: jax.Array) -> None:
         self.n = n
         self.triangle = triangle
         m = self._assembly().shape[1]
@@ -156,7 +161,7 @@ class FoldedHead(eqx.Module):
     def _assembly(self) -> np.ndarray:
         return skew_assembly(self.n) if self.triangle == "skew" else lower_assembly(self.n)
 
-    def __call__(self, h):
+    def __call__(self, h: jax.Array) -> Matrix:
         rows, sign = signed_rows(self.n, self.triangle)
         if self.row_scale is not None:
             sign = np.asarray(self.row_scale) * sign

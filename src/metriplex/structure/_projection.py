@@ -7,7 +7,7 @@ r"""The projector that makes a learned matrix exactly degenerate: the vectors of
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 import equinox as eqx
 import jax
@@ -17,8 +17,13 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import State
 
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
 
-def default_eps(eps: float | None, dtype) -> float:
+    from .scaling import Scaling
+
+
+def default_eps(eps: float | None, dtype: DTypeLike) -> float:
     """The regulariser of the projectors: machine epsilon of the working dtype by default."""
     return float(jnp.finfo(dtype).eps) if eps is None else float(eps)
 
@@ -31,7 +36,8 @@ def check_eps(eps: float | None) -> None:
         )
 
 
-def projector_vectors(g: State, scale: tuple[float, ...] | None, eps: float):
+def projector_vectors(g: State, scale: tuple[float, ...] | None,
+                      eps: float) -> tuple[State, State]:
     r"""The two vectors of the projector :math:`Q = I - \hat u\,\hat g^\top` in physical
     coordinates, for the covector :math:`g` (a gradient):
 
@@ -65,14 +71,15 @@ class AbstractProjected(eqx.Module):
     n: int = eqx.field(static=True)
     eps: float | None = eqx.field(static=True)
 
-    def __init__(self, n: int, *, eps: float | None = None, key, **options: Any):
+    def __init__(self, n: int, *, eps: float | None = None, key: jax.Array,
+                 **options: Any) -> None:
         check_eps(eps)
         self.base = self.network(n, key=key, **options)
         self.n = n
         self.eps = None if eps is None else float(eps)
 
     @property
-    def scaling(self):
+    def scaling(self) -> Scaling | None:
         return self.base.scaling
 
     def _projector(self, gradient: State, dtype):
@@ -82,9 +89,9 @@ class AbstractProjected(eqx.Module):
             gradient, None if s is None else s.scale, default_eps(self.eps, dtype)
         )
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
         return cls(n, **cls.network.spec_options(spec), eps=spec.get("eps"), key=key)

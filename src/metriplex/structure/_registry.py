@@ -6,9 +6,12 @@ exists only at the boundary (model files, command line), where configuration is 
 
 from __future__ import annotations
 
-from typing import Any, Callable, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 from .._errors import MetriplexError
+
+if TYPE_CHECKING:
+    import jax
 
 _T = TypeVar("_T")
 REGISTRY: dict[str, dict[str, type]] = {"potential": {}, "poisson": {}, "friction": {}}
@@ -23,7 +26,7 @@ def register(family: str, kind: str) -> Callable[[_T], _T]:
     return wrap
 
 
-def from_spec(family: str, spec: dict[str, Any], n: int, *, key) -> Any:
+def from_spec(family: str, spec: dict[str, Any], n: int, *, key: jax.Array) -> Any:
     kind = spec.get("kind")
     table = REGISTRY[family]
     if kind not in table:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import abc
 import functools
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import equinox as eqx
 import jax
@@ -16,7 +16,7 @@ import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
-from .._types import Matrix, State
+from .._types import Matrix, Scalar, State
 from ._abstract import AbstractPoisson
 from ._mlp import Hidden, standardise
 from ._registry import network_kwargs, register
@@ -41,12 +41,12 @@ class _Scalar(eqx.Module):
     hidden: Hidden
     out: eqx.nn.Linear
 
-    def __init__(self, width: int, depth: int, activation: str, *, key):
+    def __init__(self, width: int, depth: int, activation: str, *, key: jax.Array) -> None:
         hkey, okey = jr.split(key)
         self.hidden = Hidden(3, width, depth, activation, key=hkey)
         self.out = eqx.nn.Linear(width, "scalar", key=okey)
 
-    def __call__(self, z):
+    def __call__(self, z: State) -> Scalar:
         return self.out(self.hidden(z))
 
 
@@ -78,8 +78,8 @@ class _AbstractCasimir3(AbstractPoisson):
         depth: int = 2,
         activation: str = "softplus",
         scaling: Scaling | None = None,
-        key,
-    ):
+        key: jax.Array,
+    ) -> None:
         _check_three(n, type(self).__name__)
         self._init_scalars(functools.partial(_Scalar, width, depth, activation), key)
         self.n = n
@@ -116,7 +116,7 @@ class _AbstractCasimir3(AbstractPoisson):
         }
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
         return cls(n, **network_kwargs(spec), key=key)
 
 

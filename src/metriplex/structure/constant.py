@@ -7,7 +7,7 @@ nothing but its file.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from .._errors import MetriplexError
 from ._abstract import AbstractFriction, AbstractPoisson
 from ._fixed import AbstractConstantMatrix, frozen, square_matrix
 from ._registry import register
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @register("poisson", "constant")
@@ -30,7 +33,7 @@ class ConstantPoisson(AbstractConstantMatrix, AbstractPoisson):
     ```
     """
 
-    def __init__(self, matrix):
+    def __init__(self, matrix: ArrayLike) -> None:
         a = square_matrix(matrix, "a constant Poisson matrix L")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a + a.T).max())
@@ -54,7 +57,7 @@ class ConstantFriction(AbstractConstantMatrix, AbstractFriction):
     asymmetry, or an eigenvalue below :math:`-10^{-8}\max|M|`, is an error.
     """
 
-    def __init__(self, matrix):
+    def __init__(self, matrix: ArrayLike) -> None:
         a = square_matrix(matrix, "a constant friction matrix M")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a - a.T).max())

@@ -6,7 +6,7 @@ variants (:math:`M\nabla E = 0` by construction) can use the energy gradient.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar, Sequence
 
 import equinox as eqx
 import jax
@@ -23,6 +23,9 @@ from ._registry import network_kwargs, register
 from ._projection import AbstractProjected
 from .potential import FeatureMap
 from .scaling import Scaling, scaling_spec
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @register("friction", "mlp")
@@ -55,10 +58,10 @@ class CholeskyFriction(AbstractFriction):
         activation: str = "softplus",
         scaling: Scaling | None = None,
         features: FeatureMap | None = None,
-        data=None,
-        input_stats=None,
-        key,
-    ):
+        data: ArrayLike | None = None,
+        input_stats: Sequence[Sequence[float]] | None = None,
+        key: jax.Array,
+    ) -> None:
         if n < 1:
             raise MetriplexError(f"a friction matrix needs n >= 1 variables; got {n}.")
         self.n = n
@@ -97,7 +100,7 @@ class CholeskyFriction(AbstractFriction):
         B = self.factor(x)
         return B @ B.T
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {
             "kind": "mlp",
             "width": self.head.weight.shape[1],
@@ -110,7 +113,7 @@ class CholeskyFriction(AbstractFriction):
         }
 
     @staticmethod
-    def spec_options(spec) -> dict[str, Any]:
+    def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
         """The constructor's options saved in ``spec``."""
         feats = spec.get("features")
         return {
@@ -120,7 +123,7 @@ class CholeskyFriction(AbstractFriction):
         }
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "CholeskyFriction":
         return cls(n, **cls.spec_options(spec), key=key)
 
 

@@ -11,7 +11,7 @@ Jacobi penalty (``--jacobi exact``) to get it.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -44,7 +44,7 @@ class LiePoisson(AbstractPoisson):
     n: int = eqx.field(static=True)
     scaling: Scaling | None = eqx.field(static=True)
 
-    def __init__(self, n: int, *, scaling: Scaling | None = None, key):
+    def __init__(self, n: int, *, scaling: Scaling | None = None, key: jax.Array) -> None:
         if n < 2:
             raise MetriplexError(f"a Lie-Poisson bivector needs n >= 2 variables; got {n}.")
         self.n = n
@@ -60,10 +60,10 @@ class LiePoisson(AbstractPoisson):
         L = A - A.T
         return L if s is None else L * jnp.asarray(s.congruence(), x.dtype)
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "lie-poisson",
                 "scaling": scaling_spec(self.scaling)}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "LiePoisson":
         return cls(n, scaling=Scaling.from_json(spec.get("scaling")), key=key)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -46,8 +47,8 @@ class SkewMLPPoisson(AbstractPoisson):
         depth: int = 2,
         activation: str = "softplus",
         scaling: Scaling | None = None,
-        key,
-    ):
+        key: jax.Array,
+    ) -> None:
         if n < 2:
             raise MetriplexError(f"a learned Poisson bivector needs n >= 2 variables; got {n}.")
         self.n = n
@@ -64,7 +65,7 @@ class SkewMLPPoisson(AbstractPoisson):
         z = x if s is None else standardise(x, s.shift, s.scale)
         return self.head(self.hidden(z))
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {
             "kind": "mlp",
             "width": self.head.weight.shape[1],
@@ -74,12 +75,12 @@ class SkewMLPPoisson(AbstractPoisson):
         }
 
     @staticmethod
-    def spec_options(spec) -> dict[str, Any]:
+    def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
         """The constructor's options saved in ``spec``."""
         return network_kwargs(spec)
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "SkewMLPPoisson":
         return cls(n, **cls.spec_options(spec), key=key)
 
 
@@ -94,7 +95,7 @@ class CanonicalPoisson(AbstractPoisson):
     n: int = eqx.field(static=True)
     pairs: int = eqx.field(static=True)
 
-    def __init__(self, n: int, pairs: int):
+    def __init__(self, n: int, pairs: int) -> None:
         if pairs < 1 or 2 * pairs > n:
             raise MetriplexError(
                 f"canonical:K needs 1 <= K and 2K <= n (K positions then K momenta); got "
@@ -115,11 +116,11 @@ class CanonicalPoisson(AbstractPoisson):
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
         return jnp.asarray(self.matrix(), x.dtype)
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "canonical", "pairs": self.pairs}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "CanonicalPoisson":
         return cls(n, spec["pairs"])
 
 

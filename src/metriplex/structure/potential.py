@@ -6,7 +6,7 @@ autodiff in :class:`metriplex.GenericModel`.
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Sequence
 
 import equinox as eqx
 import jax
@@ -18,6 +18,9 @@ from .._types import Scalar, State
 from ._mlp import Hidden, data_statistics, standardise
 from ._abstract import AbstractPotential
 from ._registry import register
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 class FeatureMap(eqx.Module):
@@ -32,7 +35,8 @@ class FeatureMap(eqx.Module):
     squared_norms: tuple[tuple[tuple[int, ...], tuple[int, ...]], ...] = eqx.field(static=True)
     passthrough: tuple[int, ...] = eqx.field(static=True)
 
-    def __init__(self, squared_norms=(), passthrough=()):
+    def __init__(self, squared_norms: Iterable[Sequence[Iterable[int]]] = (),
+                 passthrough: Iterable[int] = ()) -> None:
         self.squared_norms = tuple(
             (tuple(int(i) for i in a), tuple(int(i) for i in b)) for a, b in squared_norms
         )
@@ -57,7 +61,7 @@ class FeatureMap(eqx.Module):
                 f"{bad}."
             )
 
-    def __call__(self, x):
+    def __call__(self, x: State) -> jax.Array:
         parts = []
         for a, b in self.squared_norms:
             d = x[jnp.array(a)] - (x[jnp.array(b)] if b else 0.0)
@@ -66,7 +70,7 @@ class FeatureMap(eqx.Module):
             parts.append(x[jnp.array(self.passthrough)])
         return jnp.concatenate(parts)
 
-    def to_json(self):
+    def to_json(self) -> dict[str, Any]:
         return {
             "squared_norms": [[list(a), list(b)] for a, b in self.squared_norms],
             "passthrough": list(self.passthrough),
@@ -106,13 +110,13 @@ class MLPPotential(AbstractPotential):
         depth: int = 2,
         activation: str = "softplus",
         features: FeatureMap | None = None,
-        data=None,
-        shift=None,
-        scale=None,
+        data: ArrayLike | None = None,
+        shift: Sequence[float] | None = None,
+        scale: Sequence[float] | None = None,
         output_scale: float = 1.0,
         quadratic: bool = False,
-        key,
-    ):
+        key: jax.Array,
+    ) -> None:
         import jax.random as jr
 
         if not (np.isfinite(output_scale) and output_scale > 0):
@@ -151,7 +155,7 @@ class MLPPotential(AbstractPotential):
             y = y + 0.25 * (z @ (W + W.T) @ z)
         return y if self.output_scale == 1.0 else self.output_scale * y
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {
             "kind": "mlp",
             "width": self.out.in_features,
@@ -165,7 +169,7 @@ class MLPPotential(AbstractPotential):
         }
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "MLPPotential":
         feats = spec.get("features")
         return cls(
             n,
@@ -187,7 +191,7 @@ class SumOf(AbstractPotential):
 
     indices: tuple[int, ...] = eqx.field(static=True)
 
-    def __init__(self, indices):
+    def __init__(self, indices: Iterable[int]) -> None:
         self.indices = tuple(int(i) for i in indices)
         if not self.indices:
             raise MetriplexError("SumOf needs at least one index; got an empty list.")
@@ -195,11 +199,11 @@ class SumOf(AbstractPotential):
     def __call__(self, x: State) -> Scalar:
         return jnp.sum(x[jnp.array(self.indices)])
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "sum", "indices": list(self.indices)}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "SumOf":
         return cls(spec["indices"])
 
 
@@ -210,11 +214,11 @@ class ZeroPotential(AbstractPotential):
     def __call__(self, x: State) -> Scalar:
         return jnp.zeros((), x.dtype)
 
-    def spec(self):
+    def spec(self) -> dict[str, Any]:
         return {"kind": "zero"}
 
     @classmethod
-    def from_spec(cls, spec, n, *, key):
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "ZeroPotential":
         return cls()
 
 

@@ -19,11 +19,15 @@ lives; the networks fold it into their last layer.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .._errors import MetriplexError
 from ._mlp import data_statistics
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,7 +60,7 @@ class Scaling:
         return cls((0.0,) * n, (1.0,) * n)
 
     @classmethod
-    def from_data(cls, x, factor: float = 1.0) -> "Scaling":
+    def from_data(cls, x: ArrayLike, factor: float = 1.0) -> "Scaling":
         """Per-component mean and standard deviation of states ``x`` (shape ``(N, n)``)."""
         shift, scale = data_statistics(np.asarray(x))
         return cls(shift, scale, float(factor))
@@ -78,7 +82,7 @@ class Scaling:
         return {"shift": list(self.shift), "scale": list(self.scale), "factor": self.factor}
 
     @classmethod
-    def from_json(cls, obj) -> "Scaling | None":
+    def from_json(cls, obj: dict[str, Any] | None) -> "Scaling | None":
         if obj is None:
             return None
         return cls(tuple(obj["shift"]), tuple(obj["scale"]), float(obj.get("factor", 1.0)))

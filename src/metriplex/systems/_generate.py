@@ -13,6 +13,8 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from .._errors import MetriplexError, RolloutFailure
+from .._model import GenericModel, Terms
+from .._types import Scalar, State
 from ..data import Trajectories
 from ..integrate import RK4, AbstractScheme, solve
 from ._base import System
@@ -38,7 +40,8 @@ class Substeps(AbstractScheme):
     inner: AbstractScheme
     count: int = eqx.field(static=True)
 
-    def step(self, model, x, dt, guess):
+    def step(self, model: GenericModel, x: State, dt: Scalar | float,
+             guess: State) -> tuple[State, jax.Array, jax.Array]:
         h = dt / self.count
         int_dtype = jnp.asarray(0).dtype
 
@@ -51,7 +54,8 @@ class Substeps(AbstractScheme):
         y, _, ok, its = jax.lax.fori_loop(0, self.count, body, init)
         return y, ok, its
 
-    def residual(self, model, x0, x1, dt, terms0, terms1):
+    def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
+                 terms1: Terms) -> State:
         return (x1 - self.step(model, x0, dt, x0)[0]) / dt
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -249,7 +250,7 @@ class _Pendulum(BoxSampling, System):
         # RK4 on the stiff heat-conduction mode: h * rate <= 0.11 keeps its error ~1e-6.
         return min(0.005, 0.11 / max(self.relaxation_rate, 1e-12))
 
-    def with_params(self, **params) -> "System":
+    def with_params(self, **params: Any) -> "System":
         """Other parameters; ``parameter_set="spnn"`` starts from that named set."""
         base = self
         if "parameter_set" in params:

@@ -141,7 +141,7 @@ def run_experiment(
     progress: bool = True,
     size: Size | None = None,
     defaults: bool = False,
-    **overrides,
+    **overrides: Any,
 ) -> dict[str, Any]:
     """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
 

@@ -90,7 +90,7 @@ class SpinningSatelliteConfig:
         return float(m3 * np.sqrt((1.0 / I1 - 1.0 / I3) * (1.0 / I2 - 1.0 / I3)))
 
 
-def damper_temperature(config: SpinningSatelliteConfig, s):
+def damper_temperature(config: SpinningSatelliteConfig, s: Scalar) -> Scalar:
     r""":math:`\theta = \theta_0 e^{s/c}`."""
     return bath_temperature(s, config.heat_capacity, config.theta0)
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
@@ -101,7 +102,7 @@ class StiffThermalOscillatorConfig:
         return self.conduction_rate / float(np.sqrt(self.stiffness / self.mass))
 
 
-def reservoir_temperatures(config: StiffThermalOscillatorConfig, s):
+def reservoir_temperatures(config: StiffThermalOscillatorConfig, s: jax.Array) -> jax.Array:
     r""":math:`\theta_i = \theta_0 e^{s_i/c_i}` for ``s`` of shape ``(..., 2)``."""
     return bath_temperature(s, jnp.asarray(config.heat_capacity, dtype=s.dtype), config.theta0)
 
