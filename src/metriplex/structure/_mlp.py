@@ -9,7 +9,7 @@ never by a gather or scatter per sample: XLA's CPU backward of gathers costs ~30
 from __future__ import annotations
 
 import functools
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -87,6 +87,18 @@ def standardise(x: jax.Array, shift: tuple[float, ...] | None,
     if shift is None:
         return x
     return (x - jnp.asarray(shift, x.dtype)) / jnp.asarray(scale, x.dtype)
+
+
+def network_spec(kind: str, hidden: Hidden, **entries: Any) -> dict[str, Any]:
+    """The spec (model-file entry) of a block built on ``hidden``: its ``kind``, the stack's
+    ``width``, ``depth`` and ``activation``, then the block's own ``entries`` in their order."""
+    return {
+        "kind": kind,
+        "width": hidden.layers[-1].out_features,
+        "depth": len(hidden.layers),
+        "activation": hidden.activation,
+        **entries,
+    }
 
 
 def data_statistics(z: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
@@ -173,3 +185,13 @@ class FoldedHead(eqx.Module):
         weight = sign[:, None] * self.weight[rows]
         bias = sign * self.bias[rows]
         return (weight @ h + bias).reshape(self.n, self.n)
+
+
+def folded_network(in_size: int, n: int, triangle: str, *, width: int, depth: int,
+                   activation: str, row_scale: Sequence[float] | None, init_scale: float,
+                   key: jax.Array) -> tuple[Hidden, FoldedHead]:
+    """The hidden stack (``in_size`` inputs) and the folded head (see :class:`FoldedHead`) of a
+    learned ``n x n`` matrix of ``triangle``."""
+    hkey, okey = jr.split(key)
+    return (Hidden(in_size, width, depth, activation, key=hkey),
+            FoldedHead(width, n, triangle, row_scale, init_scale, key=okey))

@@ -18,9 +18,9 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, Scalar, State
 from ._abstract import AbstractPoisson
-from ._mlp import Hidden, standardise
+from ._mlp import Hidden, network_spec
 from ._registry import network_kwargs, register
-from .scaling import Scaling, scaling_spec
+from .scaling import Scaling, scaling_spec, standardise_state
 
 
 def _cross_matrix(w) -> Matrix:
@@ -90,8 +90,7 @@ class _AbstractCasimir3(AbstractPoisson):
         """Set the scalar networks, each made by ``scalar(key=...)``."""
 
     def _z(self, x: State) -> State:
-        s = self.scaling
-        return x if s is None else standardise(x, s.shift, s.scale)
+        return standardise_state(x, self.scaling)
 
     @abc.abstractmethod
     def _factor(self, z: State):
@@ -107,13 +106,7 @@ class _AbstractCasimir3(AbstractPoisson):
         return L * jnp.asarray(s.congruence(), L.dtype)
 
     def spec(self) -> dict[str, Any]:
-        return {
-            "kind": self.kind,
-            "width": self.phi.out.in_features,
-            "depth": len(self.phi.hidden.layers),
-            "activation": self.phi.hidden.activation,
-            "scaling": scaling_spec(self.scaling),
-        }
+        return network_spec(self.kind, self.phi.hidden, scaling=scaling_spec(self.scaling))
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:

@@ -11,18 +11,17 @@ from typing import TYPE_CHECKING, Any, ClassVar, Sequence
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Matrix, State
-from ._mlp import FoldedHead, Hidden, data_statistics, standardise
+from ._mlp import FoldedHead, Hidden, data_statistics, folded_network, network_spec, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
 from ._projection import AbstractProjected
 from .potential import FeatureMap
-from .scaling import Scaling, scaling_spec
+from .scaling import Scaling, scaling_spec, standardise_state
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -76,20 +75,20 @@ class CholeskyFriction(AbstractFriction):
             None if input_stats is None
             else tuple(tuple(float(v) for v in part) for part in input_stats)
         )
-        hkey, okey = jr.split(key)
         in_size = n if features is None else features.size
-        self.hidden = Hidden(in_size, width, depth, activation, key=hkey)
-        rs = None if scaling is None else scaling.row_scale("lower")
         # Small initial B: training starts close to reversible dynamics.
-        self.head = FoldedHead(width, n, "lower", rs, 0.1, key=okey)
+        self.hidden, self.head = folded_network(
+            in_size, n, "lower", width=width, depth=depth, activation=activation,
+            row_scale=None if scaling is None else scaling.row_scale("lower"), init_scale=0.1,
+            key=key,
+        )
 
     def _inputs(self, x: State):
         if self.features is not None:
             stats = self.input_stats
             z = self.features(x)
             return z if stats is None else standardise(z, stats[0], stats[1])
-        s = self.scaling
-        return x if s is None else standardise(x, s.shift, s.scale)
+        return standardise_state(x, self.scaling)
 
     def factor(self, x: State) -> Matrix:
         return self.head(self.hidden(self._inputs(x)))
@@ -101,16 +100,13 @@ class CholeskyFriction(AbstractFriction):
         return B @ B.T
 
     def spec(self) -> dict[str, Any]:
-        return {
-            "kind": "mlp",
-            "width": self.head.weight.shape[1],
-            "depth": len(self.hidden.layers),
-            "activation": self.hidden.activation,
-            "scaling": scaling_spec(self.scaling),
-            "features": None if self.features is None else self.features.to_json(),
-            "input_stats": None if self.input_stats is None else [list(v) for v in
-                                                                   self.input_stats],
-        }
+        return network_spec(
+            "mlp", self.hidden,
+            scaling=scaling_spec(self.scaling),
+            features=None if self.features is None else self.features.to_json(),
+            input_stats=None if self.input_stats is None else [list(v) for v in
+                                                               self.input_stats],
+        )
 
     @staticmethod
     def spec_options(spec: dict[str, Any]) -> dict[str, Any]:

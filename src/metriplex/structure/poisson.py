@@ -11,17 +11,16 @@ from typing import Any, ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Matrix, State
-from ._mlp import FoldedHead, Hidden, standardise
+from ._mlp import FoldedHead, Hidden, folded_network, network_spec
 from ._abstract import AbstractPoisson
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
 from ._projection import AbstractProjected
-from .scaling import Scaling, scaling_spec
+from .scaling import Scaling, scaling_spec, standardise_state
 
 
 @register("poisson", "mlp")
@@ -53,26 +52,19 @@ class SkewMLPPoisson(AbstractPoisson):
             raise MetriplexError(f"a learned Poisson bivector needs n >= 2 variables; got {n}.")
         self.n = n
         self.scaling = scaling
-        hkey, okey = jr.split(key)
-        self.hidden = Hidden(n, width, depth, activation, key=hkey)
-        rs = None if scaling is None else scaling.row_scale("skew")
-        self.head = FoldedHead(width, n, "skew", rs, 1.0, key=okey)
+        self.hidden, self.head = folded_network(
+            n, n, "skew", width=width, depth=depth, activation=activation,
+            row_scale=None if scaling is None else scaling.row_scale("skew"), init_scale=1.0,
+            key=key,
+        )
 
     uses_gradient: ClassVar[bool] = False
 
     def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
-        s = self.scaling
-        z = x if s is None else standardise(x, s.shift, s.scale)
-        return self.head(self.hidden(z))
+        return self.head(self.hidden(standardise_state(x, self.scaling)))
 
     def spec(self) -> dict[str, Any]:
-        return {
-            "kind": "mlp",
-            "width": self.head.weight.shape[1],
-            "depth": len(self.hidden.layers),
-            "activation": self.hidden.activation,
-            "scaling": scaling_spec(self.scaling),
-        }
+        return network_spec("mlp", self.hidden, scaling=scaling_spec(self.scaling))
 
     @staticmethod
     def spec_options(spec: dict[str, Any]) -> dict[str, Any]:

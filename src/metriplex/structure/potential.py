@@ -15,7 +15,7 @@ import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Scalar, State
-from ._mlp import Hidden, data_statistics, standardise
+from ._mlp import Hidden, data_statistics, network_spec, standardise
 from ._abstract import AbstractPotential
 from ._registry import register
 
@@ -156,17 +156,14 @@ class MLPPotential(AbstractPotential):
         return y if self.output_scale == 1.0 else self.output_scale * y
 
     def spec(self) -> dict[str, Any]:
-        return {
-            "kind": "mlp",
-            "width": self.out.in_features,
-            "depth": len(self.hidden.layers),
-            "activation": self.hidden.activation,
-            "features": None if self.features is None else self.features.to_json(),
-            "shift": self.shift,
-            "scale": self.scale,
-            "output_scale": self.output_scale,
-            "quadratic": self.quadratic is not None,
-        }
+        return network_spec(
+            "mlp", self.hidden,
+            features=None if self.features is None else self.features.to_json(),
+            shift=self.shift,
+            scale=self.scale,
+            output_scale=self.output_scale,
+            quadratic=self.quadratic is not None,
+        )
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "MLPPotential":

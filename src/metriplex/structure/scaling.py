@@ -24,9 +24,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .._errors import MetriplexError
-from ._mlp import data_statistics
+from .._types import State
+from ._mlp import data_statistics, standardise
 
 if TYPE_CHECKING:
+    import jax
     from numpy.typing import ArrayLike
 
 
@@ -91,3 +93,9 @@ class Scaling:
 def scaling_spec(scaling: Scaling | None) -> dict | None:
     """What a block's ``spec()`` records of its scaling (``None`` for none)."""
     return None if scaling is None else scaling.to_json()
+
+
+def standardise_state(x: State, scaling: Scaling | None) -> jax.Array:
+    """What a block's network sees of the state: :math:`D^{-1}(x - c)`, or ``x`` itself without
+    a scaling."""
+    return x if scaling is None else standardise(x, scaling.shift, scaling.scale)
