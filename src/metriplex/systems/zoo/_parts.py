@@ -1,5 +1,6 @@
 r"""What several zoo systems share: a heat bath of constant heat capacity :math:`c`, the
-friction by which a motion heats it, and the energy and frequency of a hardening oscillator.
+friction by which a motion heats it, the energy and frequency of a hardening oscillator, and the
+check that a config's parameters have their signs (:func:`check_signs`).
 
 A bath of entropy :math:`s` holds the energy :math:`U(s) = c\,\theta_0(e^{s/c} - 1)` at the
 temperature :math:`\theta = U'(s) = \theta_0 e^{s/c}`. Friction of coefficient :math:`\gamma`
@@ -10,12 +11,14 @@ on the velocities :math:`v` of :math:`k` canonical pairs heats it through
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._errors import MetriplexError
 from ..._types import Matrix, Scalar
 
 
@@ -61,3 +64,30 @@ def hardening_frequency(
     :math:`|q| \le |{\rm center}_0| + |{\rm halfwidth}_0|`."""
     q = abs(x0_center[0]) + abs(x0_halfwidth[0])
     return float(np.sqrt((stiffness + 3.0 * quartic * q**2) / inertia))
+
+
+def check_signs(config: Any, system: str, *, positive: Sequence[str] = (),
+                nonnegative: Sequence[str] = (), example: str) -> None:
+    """Raise unless the fields of ``config`` named in ``positive`` are > 0 and those named in
+    ``nonnegative`` are >= 0 (each entry of a tuple field; NaN is neither). The message names
+    ``system``, the rule, every value it checks (in the config's field order) and ``example``,
+    a valid setting."""
+
+    def holds(name: str, strict: bool) -> bool:
+        value = getattr(config, name)
+        entries = value if isinstance(value, tuple) else (value,)
+        return all(v > 0.0 if strict else v >= 0.0 for v in entries)
+
+    if all(holds(k, True) for k in positive) and all(holds(k, False) for k in nonnegative):
+        return
+    rule = " and ".join(f"{sign} {_listing(names)}" for sign, names in
+                        (("positive", positive), ("non-negative", nonnegative)) if names)
+    checked = set(positive) | set(nonnegative)
+    got = ", ".join(f"{f.name}={getattr(config, f.name)}" for f in dataclasses.fields(config)
+                    if f.name in checked)
+    raise MetriplexError(f"{system} needs {rule}; got {got}. Example: {example}.")
+
+
+def _listing(names: Sequence[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"

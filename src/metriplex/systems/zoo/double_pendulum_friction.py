@@ -32,13 +32,12 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import BoxSampling, System, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import bath_energy, bath_temperature, heating_factor
+from ._parts import bath_energy, bath_temperature, check_signs, heating_factor
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,22 +61,12 @@ class DoublePendulumFrictionConfig:
     x0_halfwidth: tuple[float, float, float, float, float] = (0.6, 0.6, 0.6, 0.3, 0.001)
 
     def __post_init__(self):
-        if min(self.masses) <= 0.0 or min(self.lengths) <= 0.0:
-            raise MetriplexError(
-                f"double-pendulum-friction needs positive masses and lengths; got "
-                f"masses={self.masses}, lengths={self.lengths}. Example: masses=(1, 0.5)."
-            )
-        if min(self.friction) < 0.0 or self.gravity < 0.0:
-            raise MetriplexError(
-                f"joint friction coefficients and gravity must be >= 0; got "
-                f"friction={self.friction}, gravity={self.gravity}. "
-                "Example: friction=(0.1, 0.05)."
-            )
-        if not (self.heat_capacity > 0.0 and self.theta0 > 0.0):
-            raise MetriplexError(
-                f"the reservoir needs heat_capacity > 0 and theta0 > 0; got "
-                f"heat_capacity={self.heat_capacity}, theta0={self.theta0}."
-            )
+        check_signs(self, "double-pendulum-friction", positive=("masses", "lengths"),
+                    example="masses=(1, 0.5)")
+        check_signs(self, "double-pendulum-friction", nonnegative=("gravity", "friction"),
+                    example="friction=(0.1, 0.05)")
+        check_signs(self, "double-pendulum-friction", positive=("heat_capacity", "theta0"),
+                    example="heat_capacity=0.05, theta0=300")
 
 
 def _inverse_mass(c: DoublePendulumFrictionConfig, x: State):

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
@@ -28,6 +27,7 @@ from ._case import ZooCase, case_settings
 from ._parts import (
     bath_energy,
     bath_temperature,
+    check_signs,
     hardening_frequency,
     heating_friction,
     oscillator_energy,
@@ -55,15 +55,9 @@ class OscillatorBathConfig:
     x0_halfwidth: tuple[float, float, float] = (1.5, 2.0, 0.2)
 
     def __post_init__(self):
-        positive = (self.mass, self.stiffness, self.heat_capacity, self.theta0)
-        if not (min(positive) > 0.0 and self.quartic >= 0.0 and self.damping >= 0.0):
-            raise MetriplexError(
-                "oscillator-bath needs positive mass, stiffness, heat_capacity and theta0 and "
-                f"non-negative quartic and damping; got mass={self.mass}, "
-                f"stiffness={self.stiffness}, quartic={self.quartic}, damping={self.damping}, "
-                f"heat_capacity={self.heat_capacity}, theta0={self.theta0}. "
-                "Example: stiffness=4, damping=0.1."
-            )
+        check_signs(self, "oscillator-bath",
+                    positive=("mass", "stiffness", "heat_capacity", "theta0"),
+                    nonnegative=("quartic", "damping"), example="stiffness=4, damping=0.1")
 
 
 def _energy(c: OscillatorBathConfig, x: State) -> Scalar:

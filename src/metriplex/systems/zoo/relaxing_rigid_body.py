@@ -37,6 +37,7 @@ from ...structure import KnownPoisson
 from .._base import BallSampling, System, analytic_model
 from ..rigid_body import _lie_poisson, _rotational_energy
 from ._case import ZooCase, case_settings
+from ._parts import check_signs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,12 +66,8 @@ class RelaxingRigidBodyConfig:
                 "relaxing-rigid-body inertia must be strictly increasing positive moments "
                 f"I1 < I2 < I3; got inertia={self.inertia}. Example: inertia=(2, 3, 5)."
             )
-        if not (self.gamma > 0.0 and self.kappa >= 0.0 and self.radius > 0.0):
-            raise MetriplexError(
-                "relaxing-rigid-body needs gamma > 0, kappa >= 0 and radius > 0; got "
-                f"gamma={self.gamma}, kappa={self.kappa}, radius={self.radius}. "
-                "Example: gamma=1, kappa=0.08, radius=1."
-            )
+        check_signs(self, "relaxing-rigid-body", positive=("gamma", "radius"),
+                    nonnegative=("kappa",), example="gamma=1, kappa=0.08, radius=1")
         # Smallest |m1| and largest |m3| over the ball (conservative for the basin test).
         c1, c2, c3 = self.center
         m1 = abs(c1) - self.radius

@@ -23,13 +23,18 @@ from __future__ import annotations
 
 import dataclasses
 
-from ..._errors import MetriplexError
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import BoxSampling, System, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import bath_energy, bath_temperature, hardening_frequency, heating_friction
+from ._parts import (
+    bath_energy,
+    bath_temperature,
+    check_signs,
+    hardening_frequency,
+    heating_friction,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,16 +59,9 @@ class RLCCircuitConfig:
     x0_halfwidth: tuple[float, float, float] = (1.0e-3, 8.0e-4, 2.0e-7)
 
     def __post_init__(self):
-        positive = (self.capacitance, self.inductance, self.heat_capacity, self.theta0)
-        if not (min(positive) > 0.0 and self.nonlinearity >= 0.0 and self.resistance >= 0.0):
-            raise MetriplexError(
-                "rlc-circuit needs positive capacitance, inductance, heat_capacity and theta0 "
-                f"and non-negative nonlinearity and resistance; got "
-                f"capacitance={self.capacitance}, inductance={self.inductance}, "
-                f"nonlinearity={self.nonlinearity}, resistance={self.resistance}, "
-                f"heat_capacity={self.heat_capacity}, theta0={self.theta0}. "
-                "Example: resistance=0.025."
-            )
+        check_signs(self, "rlc-circuit",
+                    positive=("capacitance", "inductance", "heat_capacity", "theta0"),
+                    nonnegative=("nonlinearity", "resistance"), example="resistance=0.025")
 
 
 def _energy(c: RLCCircuitConfig, x: State) -> Scalar:

@@ -41,7 +41,7 @@ from ...structure import KnownPoisson, SumOf
 from .._base import BoxSampling, System, analytic_model
 from ..rigid_body import _lie_poisson, _rotational_energy
 from ._case import ZooCase, case_settings
-from ._parts import bath_energy, bath_temperature
+from ._parts import bath_energy, bath_temperature, check_signs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,12 +74,9 @@ class SpinningSatelliteConfig:
                 f"(the spin axis is the major axis); got inertia={self.inertia}. "
                 "Example: inertia=(800, 900, 1000)."
             )
-        if not (self.damping >= 0.0 and self.heat_capacity > 0.0 and self.theta0 > 0.0):
-            raise MetriplexError(
-                "spinning-satellite needs damping >= 0 and positive heat_capacity and theta0; "
-                f"got damping={self.damping}, heat_capacity={self.heat_capacity}, "
-                f"theta0={self.theta0}. Example: damping=1e-5, heat_capacity=1, theta0=1."
-            )
+        check_signs(self, "spinning-satellite", positive=("heat_capacity", "theta0"),
+                    nonnegative=("damping",),
+                    example="damping=1e-5, heat_capacity=1, theta0=1")
 
     @property
     def nutation_frequency(self) -> float:

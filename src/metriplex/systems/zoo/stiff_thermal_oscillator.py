@@ -43,7 +43,13 @@ from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import System, _uniform_box, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import bath_energy, bath_temperature, hardening_frequency, oscillator_energy
+from ._parts import (
+    bath_energy,
+    bath_temperature,
+    check_signs,
+    hardening_frequency,
+    oscillator_energy,
+)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,15 +81,9 @@ class StiffThermalOscillatorConfig:
     imbalance: float = 2e-3
 
     def __post_init__(self):
-        positive = (self.mass, self.stiffness, min(self.heat_capacity), self.theta0, self.kappa)
-        if not (min(positive) > 0.0 and self.quartic >= 0.0 and self.friction >= 0.0):
-            raise MetriplexError(
-                "stiff-thermal-oscillator needs positive mass, stiffness, heat capacities, "
-                "theta0 and kappa and non-negative quartic and friction; got "
-                f"mass={self.mass}, stiffness={self.stiffness}, quartic={self.quartic}, "
-                f"friction={self.friction}, heat_capacity={self.heat_capacity}, "
-                f"theta0={self.theta0}, kappa={self.kappa}. Example: kappa=0.3333, friction=0.15."
-            )
+        check_signs(self, "stiff-thermal-oscillator",
+                    positive=("mass", "stiffness", "heat_capacity", "theta0", "kappa"),
+                    nonnegative=("quartic", "friction"), example="kappa=0.3333, friction=0.15")
         if not 0.0 <= self.imbalance < 0.5:
             raise MetriplexError(
                 "stiff-thermal-oscillator's initial temperature imbalance must be in [0, 0.5) "

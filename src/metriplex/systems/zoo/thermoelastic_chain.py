@@ -40,7 +40,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import System, _sample_box, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import bath_temperature
+from ._parts import bath_temperature, check_signs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,18 +75,11 @@ class ThermoelasticChainConfig:
                 f"the thermoelastic chain needs an integer number of particles >= 2; got "
                 f"particles={self.particles!r}. Example: particles=10."
             )
-        positive = (self.mass, self.stiffness, self.heat_capacity, self.theta0)
-        nonneg = (self.quartic, self.friction, self.conductivity, self.displacement_halfwidth,
-                  self.momentum_halfwidth, self.entropy_halfwidth)
-        if not (min(positive) > 0.0 and min(nonneg) >= 0.0):
-            raise MetriplexError(
-                "the thermoelastic chain needs positive mass, stiffness, heat_capacity and "
-                "theta0, and non-negative quartic, friction, conductivity and half-widths; got "
-                f"mass={self.mass}, stiffness={self.stiffness}, "
-                f"heat_capacity={self.heat_capacity}, theta0={self.theta0}, "
-                f"quartic={self.quartic}, friction={self.friction}, "
-                f"conductivity={self.conductivity}. Example: friction=0.05."
-            )
+        check_signs(self, "thermoelastic-chain",
+                    positive=("mass", "stiffness", "heat_capacity", "theta0"),
+                    nonnegative=("quartic", "friction", "conductivity", "displacement_halfwidth",
+                                 "momentum_halfwidth", "entropy_halfwidth"),
+                    example="friction=0.05")
 
 
 def _extensions(q: State) -> State:
