@@ -66,6 +66,12 @@ def hardening_frequency(
     return float(np.sqrt((stiffness + 3.0 * quartic * q**2) / inertia))
 
 
+def oscillator_frequency(c: Any) -> float:
+    r""":func:`hardening_frequency` of the oscillator of :func:`oscillator_energy`, for a config
+    with ``mass``, ``stiffness``, ``quartic``, ``x0_center`` and ``x0_halfwidth``."""
+    return hardening_frequency(c.stiffness, c.quartic, c.mass, c.x0_center, c.x0_halfwidth)
+
+
 def check_signs(config: Any, system: str, *, positive: Sequence[str] = (),
                 nonnegative: Sequence[str] = (), example: str) -> None:
     """Raise unless the fields of ``config`` named in ``positive`` are > 0 and those named in

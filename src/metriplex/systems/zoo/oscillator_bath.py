@@ -28,9 +28,9 @@ from ._parts import (
     bath_energy,
     bath_temperature,
     check_signs,
-    hardening_frequency,
     heating_friction,
     oscillator_energy,
+    oscillator_frequency,
 )
 
 
@@ -84,9 +84,7 @@ class OscillatorBath(BoxSampling, System):
 
     @property
     def max_substep(self) -> float:
-        c = self.config
-        omega = hardening_frequency(c.stiffness, c.quartic, c.mass, c.x0_center, c.x0_halfwidth)
-        return float(min(0.005, 0.01 / omega))
+        return float(min(0.005, 0.01 / oscillator_frequency(self.config)))
 
     def _build_model(self) -> GenericModel:
         return analytic_model(self.config, energy=_energy, entropy=SumOf((2,)),

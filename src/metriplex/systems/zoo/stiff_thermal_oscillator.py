@@ -47,8 +47,8 @@ from ._parts import (
     bath_energy,
     bath_temperature,
     check_signs,
-    hardening_frequency,
     oscillator_energy,
+    oscillator_frequency,
 )
 
 
@@ -142,8 +142,7 @@ class StiffThermalOscillator(System):
     def max_substep(self) -> float:
         # RK4 needs h * lambda well inside its stability region and accurate: h * lambda <= 0.1.
         c = self.config
-        omega = hardening_frequency(c.stiffness, c.quartic, c.mass, c.x0_center, c.x0_halfwidth)
-        return min(0.01 / omega, 0.1 / c.conduction_rate)
+        return min(0.01 / oscillator_frequency(c), 0.1 / c.conduction_rate)
 
     def _build_model(self) -> GenericModel:
         return analytic_model(self.config, energy=_energy, entropy=SumOf((2, 3)),
