@@ -61,7 +61,7 @@ class RunConfig:
     scheme: str = "cn"
     w_traj: float = 1.0
     w_degeneracy_L: float = 10.0
-    w_degeneracy_M: float = 1.0
+    w_degeneracy_M: float = 10.0
     w_jacobi: float = 1.0
     quadratic: bool = False
     width: int = 64
@@ -365,14 +365,13 @@ PRESETS: dict[str, dict[str, Any]] = {
     "pendulum-energetic": dict(
         energy="neural", entropy="sum:8,9", poisson="canonical:4", friction="neural",
         features="pendulum", features_for="energy,friction", width=64, depth=2, lr=1e-2,
-        batch_size=256, degeneracy_at="midpoints", w_degeneracy_M=10.0,
+        batch_size=256, degeneracy_at="midpoints",
         scheme="discrete-gradient",
     ),
     "pendulum-temperature": dict(
         energy="neural", entropy="neural", poisson="neural", friction="neural",
         jacobi="stochastic", jacobi_probes=2, features="pendulum", width=64, depth=2, lr=1e-2,
         batch_size=256, scheme="discrete-gradient", degeneracy_at="midpoints",
-        w_degeneracy_M=10.0,
     ),
     # w_degeneracy_M = 1, not 10: early in training any M != 0 violates M grad E = 0 for the
     # still-wrong E, and a strong penalty holds M near 0 while E is learned (gas, 10 000 steps,
