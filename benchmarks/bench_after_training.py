@@ -60,6 +60,9 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             runs.fit = fit
         end = time.perf_counter()
+    if "fit_end" not in marks:
+        print(f"metriplex train stopped before training (exit {code}); nothing to time.")
+        return code or 1
     training = marks["fit_end"] - marks["fit_start"]
     after = end - marks["fit_end"]
     print(f"{args.trajectories} x {args.samples} pendulum, load {load:.2f} -> "
