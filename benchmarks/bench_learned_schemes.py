@@ -22,7 +22,7 @@ import numpy as np  # noqa: E402
 
 import metriplex as mx  # noqa: E402
 from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
-from metriplex.integrate import scheme_from_name  # noqa: E402
+from metriplex.config import scheme_from_name  # noqa: E402
 
 EXPERIMENTS = ("rigid-body", "pendulum-energetic", "pendulum-temperature", "gas-containers")
 SCHEMES = ("cn", "midpoint", "discrete-gradient", "rk4")

@@ -1,11 +1,12 @@
-"""Implicit-step solvers compared: Newton at every step vs fixed point first (``auto``).
+"""Implicit-step root finders compared: Newton at every step vs fixed point first (``auto``).
 
 For the ``unit`` thermoelastic pendulum (64 trajectories x 1000 steps, dt = 0.1), each row
-rolls out one model with one scheme and dtype under ``solver="newton"`` and ``solver="auto"``
-in the same process, repeats interleaved, and prints the median process CPU time, the mean
-iterations per step, and an accuracy figure: for float32, the relative error at t = 10 against
-a tight float64 Newton rollout of the same scheme; for the float64 discrete gradient, the
-largest relative energy drift over t in [0, 100].
+rolls out one model with one scheme and dtype under ``root_finder=Newton()`` (``newton``) and
+``root_finder=FixedPointThenNewton()`` (``auto``, the default) in the same process, repeats
+interleaved, and prints the median process CPU time, the mean iterations per step, and an
+accuracy figure: for float32, the relative error at t = 10 against a tight float64 Newton
+rollout of the same scheme; for the float64 discrete gradient, the largest relative energy
+drift over t in [0, 100].
 
 ```
 .venv/bin/python benchmarks/bench_solvers.py            # ~2 minutes on 2 cores
@@ -69,7 +70,7 @@ def main(argv=None) -> int:
     truth = system.model
     tight = {
         name: np.asarray(mx.solve(truth, jnp.asarray(x0), jnp.asarray(ts),
-                                  scheme=cls(solver="newton", rtol=1e-13, atol=1e-13)).xs)
+                                  scheme=cls(root_finder=mx.Newton(rtol=1e-13, atol=1e-13))).xs)
         for name, cls in (("cn", mx.CrankNicolson), ("discrete-gradient", mx.DiscreteGradient))
     }
     energy = jax.vmap(jax.vmap(truth.energy))
@@ -88,8 +89,8 @@ def main(argv=None) -> int:
         model = with_dtype(model, dtype)
         xs0, grid = jnp.asarray(x0, dtype), jnp.asarray(ts, dtype)
         cls = mx.CrankNicolson if name == "cn" else mx.DiscreteGradient
-        res = {s: _time(model, xs0, grid, cls(solver=s), args.repeats)
-               for s in ("newton", "auto")}
+        res = {s: _time(model, xs0, grid, cls(root_finder=finder), args.repeats)
+               for s, finder in (("newton", mx.Newton()), ("auto", mx.FixedPointThenNewton()))}
         acc = []
         for solver in ("newton", "auto"):
             xs = np.asarray(res[solver][0].xs, dtype=np.float64)

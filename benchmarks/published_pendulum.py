@@ -46,9 +46,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from zoo import _coerce, _fmt, standardised_error  # noqa: E402
 
-from metriplex.config import RunConfig  # noqa: E402
+from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
-from metriplex.integrate import DiscreteGradient, scheme_from_name  # noqa: E402
+from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
 from metriplex.systems import SYSTEMS, generate  # noqa: E402
 

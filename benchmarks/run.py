@@ -69,7 +69,7 @@ jax.config.update("jax_enable_x64", True)  # float64 rows; float32 rows cast exp
 
 import metriplex as mx  # noqa: E402
 from metriplex._build import build_loss, build_model  # noqa: E402
-from metriplex.config import RunConfig, preset  # noqa: E402
+from metriplex.config import RunConfig, preset, scheme_from_name  # noqa: E402
 from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
@@ -326,7 +326,7 @@ def bench_rollout(args) -> list[dict]:
         model = with_dtype(model, jnp.float32)
         for k, solver in itertools.product(args.rollout_batches, args.rollout_solvers):
             x0 = jnp.asarray(x0_all[0] if k == 1 else x0_all[:k], jnp.float32)
-            scheme = mx.CrankNicolson(solver=solver)
+            scheme = scheme_from_name("cn", solver=solver)
             t0 = time.perf_counter()
             out = mx.solve(model, x0, ts, scheme=scheme)
             jax.block_until_ready(out.xs)

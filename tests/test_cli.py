@@ -194,9 +194,9 @@ def test_help_lists_commands():
 
 def test_cli_solver_choices_match_the_library():
     from metriplex.cli import build_parser
-    from metriplex.integrate import SOLVERS
+    from metriplex.integrate import ROOT_FINDERS
 
     sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
     for command in ("rollout", "evaluate"):
         solver = next(a for a in sub.choices[command]._actions if a.dest == "solver")
-        assert tuple(solver.choices) == SOLVERS
+        assert tuple(solver.choices) == tuple(ROOT_FINDERS)

@@ -21,7 +21,7 @@ import pytest
 import metriplex as mx
 from metriplex import diagnostics
 from metriplex.cli import main
-from metriplex.integrate import scheme_from_name
+from metriplex.app.config import scheme_from_name
 from helpers import damped_oscillator, make_data, oscillator_x0
 
 

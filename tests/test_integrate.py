@@ -15,11 +15,15 @@ from metriplex.integrate import (
     SCHEMES,
     CrankNicolson,
     DiscreteGradient,
+    ROOT_FINDERS,
+    FixedPoint,
+    FixedPointThenNewton,
     ImplicitMidpoint,
-    scheme_from_name,
+    Newton,
     simulate,
     solve,
 )
+from metriplex.app.config import scheme_from_name
 
 
 def _rotor_energy(x):
@@ -102,7 +106,8 @@ def test_failed_step_is_reported_not_silent_nan(scheme):
     its = np.asarray(out.iterations)
     # It tried: the fixed-point iteration (which may stop early on overflow), then the whole
     # Newton budget.
-    assert scheme.max_steps < its[0, 3] <= scheme.fixed_point_steps + scheme.max_steps
+    finder = scheme.root_finder
+    assert finder.max_steps < its[0, 3] <= finder.fixed_point_steps + finder.max_steps
     assert np.all(its[0, 4:] == 0)  # and then stopped trying
     # The failed trajectory does not hold back the other one.
     assert np.all(np.isfinite(xs[1]))
@@ -157,7 +162,7 @@ def test_batched_equals_one_by_one_and_newton_stays_short():
     x0 = jnp.array([[0.6, -0.3], [0.1, 0.2], [-0.4, 0.0]])
     ts = jnp.stack([jnp.linspace(0.0, 3.0, 31), jnp.linspace(0.0, 1.0, 31),
                     jnp.concatenate([jnp.linspace(0.0, 2.0, 21), jnp.full((10,), 2.0)])])
-    newton = CrankNicolson(solver="newton")
+    newton = CrankNicolson(root_finder=Newton())
     batched = solve(ROTOR, x0, ts, scheme=newton)
     assert np.asarray(batched.xs).shape == (3, 31, 2)
     for b in range(3):
@@ -226,28 +231,39 @@ def test_auto_solver_matches_newton_and_falls_back_where_the_fixed_point_diverge
     x0 = jnp.array([[0.6, -0.3], [0.1, 0.2]])
     ts = jnp.linspace(0.0, 3.0, 31)
     auto = solve(ROTOR, x0, ts, scheme=CrankNicolson())
-    newton = solve(ROTOR, x0, ts, scheme=CrankNicolson(solver="newton"))
-    fixed = solve(ROTOR, x0, ts, scheme=CrankNicolson(solver="fixed-point"))
+    newton = solve(ROTOR, x0, ts, scheme=CrankNicolson(root_finder=Newton()))
+    fixed = solve(ROTOR, x0, ts, scheme=CrankNicolson(root_finder=FixedPoint()))
     assert auto.ok and newton.ok and fixed.ok
     np.testing.assert_allclose(np.asarray(auto.xs), np.asarray(newton.xs), rtol=0, atol=1e-13)
     # Once the predictor has two past steps, no step needs Newton.
-    assert np.all(np.asarray(auto.iterations)[:, 3:] <= CrankNicolson().fixed_point_steps)
+    assert np.all(np.asarray(auto.iterations)[:, 3:] <= FixedPointThenNewton().fixed_point_steps)
     # Stiff: the fixed point fails, Newton takes over, and the step is exactly CN's.
     x1 = jnp.array([[1.0], [0.5]])
-    fixed = solve(STIFF, x1, TS_STIFF, scheme=CrankNicolson(solver="fixed-point"))
+    fixed = solve(STIFF, x1, TS_STIFF, scheme=CrankNicolson(root_finder=FixedPoint()))
     assert np.asarray(fixed.failed_step).tolist() == [1, 1]
     auto = solve(STIFF, x1, TS_STIFF, scheme=CrankNicolson())
     assert auto.ok
     its = np.asarray(auto.iterations)
-    assert np.all(its[:, 1:] > CrankNicolson().fixed_point_steps)  # Newton ran at every step
+    assert np.all(its[:, 1:] > FixedPointThenNewton().fixed_point_steps)  # Newton ran at every step
     growth = (1 - 2.5) / (1 + 2.5)  # CN's amplification factor at k dt = 5
     exact_cn = np.asarray(x1) * growth ** np.arange(11)[None, :]
     np.testing.assert_allclose(np.asarray(auto.xs)[..., 0], exact_cn, rtol=1e-12, atol=1e-14)
 
 
-def test_unknown_solver_is_explained():
-    with pytest.raises(mx.MetriplexError, match="solver must be one of auto, newton"):
-        CrankNicolson(solver="bisection")
+def test_a_root_finder_is_an_object_and_a_solver_name_is_parsed_at_the_edge():
+    # The library takes root finder objects; a string is explained, never silently kept.
+    with pytest.raises(mx.MetriplexError, match="root_finder must be a root finder"):
+        CrankNicolson(root_finder="newton")
+    assert isinstance(CrankNicolson().root_finder, FixedPointThenNewton)
+    # The command line's names: every registered root finder, and only implicit schemes.
+    for name, (cls, _) in ROOT_FINDERS.items():
+        scheme = scheme_from_name("midpoint", solver=name)
+        assert isinstance(scheme, ImplicitMidpoint) and type(scheme.root_finder) is cls
+    with pytest.raises(mx.MetriplexError, match="--solver must be one of auto, newton"):
+        scheme_from_name("cn", solver="bisection")
+    with pytest.raises(mx.MetriplexError, match="--solver applies to the implicit schemes "
+                                                r"\(cn, midpoint, discrete-gradient\)"):
+        scheme_from_name("rk4", solver="newton")
 
 
 def test_error_to_horizon_ignores_a_failure_after_the_horizon():

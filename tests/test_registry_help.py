@@ -7,7 +7,7 @@ import pytest
 
 from metriplex import config
 from metriplex.cli import build_parser
-from metriplex.integrate import SCHEMES, SOLVERS, AbstractScheme
+from metriplex.integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
 
 
 def _help(command: str, monkeypatch) -> str:
@@ -23,8 +23,8 @@ def test_every_registered_scheme_is_in_the_help_with_its_summary(command, monkey
     for name, cls in SCHEMES.items():
         assert f"{name} ({cls.summary})" in text
     if command != "train":
-        for solver in SOLVERS:
-            assert solver in text
+        for name, (_, summary) in ROOT_FINDERS.items():
+            assert f"{name} ({summary})" in text
 
 
 @pytest.mark.parametrize("table", ["ENERGY_CHOICES", "ENTROPY_CHOICES", "POISSON_CHOICES",

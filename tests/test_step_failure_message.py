@@ -1,12 +1,14 @@
 """A failed step's message suggests only what the user has not tried already."""
 
+import pytest
+
 import metriplex as mx
 from metriplex._solve.rollout import step_failure
 
 
 def test_failed_implicit_step_suggests_newton_only_when_it_was_not_used():
     auto = step_failure(mx.CrankNicolson(), 1.0, 1.5)
-    newton = step_failure(mx.CrankNicolson(solver="newton"), 1.0, 1.5)
+    newton = step_failure(mx.CrankNicolson(root_finder=mx.Newton()), 1.0, 1.5)
     assert "--solver newton" in auto
     assert "did not converge (solver 'newton')" in newton
     assert "--solver newton" not in newton
@@ -16,3 +18,15 @@ def test_failed_implicit_step_suggests_newton_only_when_it_was_not_used():
 def test_failed_explicit_step_speaks_of_a_non_finite_state_not_a_solve():
     message = step_failure(mx.RK4(), 0.0, 0.1)
     assert "non-finite" in message and "converge" not in message
+
+
+def test_a_root_finder_outside_the_registry_is_named_by_its_class():
+    class Bisection(mx.AbstractRootFinder):
+        def solve_batch(self, update, x0, guess, args):
+            return guess, True, 0
+
+    message = step_failure(mx.CrankNicolson(root_finder=Bisection()), 1.0, 1.5)
+    assert "did not converge (solver 'Bisection')" in message
+    assert "--solver newton" in message
+    with pytest.raises(TypeError):
+        mx.AbstractRootFinder()

@@ -18,10 +18,14 @@ from .data import Trajectories as Trajectories
 from ._units import Units as Units
 from .diagnostics import evaluate as evaluate
 from .integrate import RK4 as RK4
+from .integrate import AbstractRootFinder as AbstractRootFinder
 from .integrate import AbstractScheme as AbstractScheme
 from .integrate import CrankNicolson as CrankNicolson
 from .integrate import DiscreteGradient as DiscreteGradient
+from .integrate import FixedPoint as FixedPoint
+from .integrate import FixedPointThenNewton as FixedPointThenNewton
 from .integrate import ImplicitMidpoint as ImplicitMidpoint
+from .integrate import Newton as Newton
 from .integrate import Rollout as Rollout
 from .integrate import simulate as simulate
 from .integrate import solve as solve

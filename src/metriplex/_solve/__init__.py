@@ -8,8 +8,9 @@ Each scheme is a small object with two verbs:
   in units of ``dx/dt`` — zero when ``x1`` is exactly the scheme's step from ``x0``. Training
   minimises it, so the model is learned for the scheme that will roll it out.
 
-Implicit equations are solved with Optimistix (fixed-point iteration, and Newton's method where
-that does not converge; see ``solver``); a step that does not converge is reported
+Implicit equations are solved with Optimistix by the scheme's ``root_finder`` (default
+:class:`FixedPointThenNewton`: fixed-point iteration, and Newton's method where that does not
+converge; see ``root_finder.py``); a step that does not converge is reported
 (``Rollout.failed_step``), never passed on as a silent NaN.
 
 Which scheme keeps what (for any model, to solver tolerance):
@@ -35,9 +36,16 @@ from .discrete_gradient import (
 from .midpoint import ImplicitMidpoint
 from .rk4 import RK4
 from .rollout import Rollout, model_size, simulate, solve, step_failure
-from ._implicit import SOLVERS
+from .root_finder import (
+    ROOT_FINDERS,
+    AbstractRootFinder,
+    FixedPoint,
+    FixedPointThenNewton,
+    Newton,
+)
 from ._scheme import AbstractScheme
 
-__all__ = ["RK4", "SOLVERS", "AbstractScheme", "CrankNicolson", "DiscreteGradient",
-           "ImplicitMidpoint", "Rollout", "discrete_generic_field", "discrete_gradient",
-           "model_size", "project_out", "simulate", "solve", "step_failure"]
+__all__ = ["RK4", "ROOT_FINDERS", "AbstractRootFinder", "AbstractScheme", "CrankNicolson",
+           "DiscreteGradient", "FixedPoint", "FixedPointThenNewton", "ImplicitMidpoint", "Newton",
+           "Rollout", "discrete_generic_field", "discrete_gradient", "model_size", "project_out",
+           "simulate", "solve", "step_failure"]

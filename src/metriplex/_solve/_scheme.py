@@ -1,21 +1,13 @@
-"""The interface of a one-step scheme, and the default solver tolerance."""
+"""The interface of a one-step scheme."""
 
 from __future__ import annotations
 
 import abc
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
 from .._model import GenericModel, Terms
 from .._types import Scalar, State, States
-
-
-
-def _tolerance(value: float | None, dtype) -> float:
-    if value is not None:
-        return value
-    return 1e-11 if jnp.dtype(dtype) == jnp.float64 else 1e-5
 
 
 class AbstractScheme(eqx.Module):

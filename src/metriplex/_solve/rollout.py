@@ -15,6 +15,7 @@ from .._model import GenericModel
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
 from ._implicit import _Implicit
+from .root_finder import Newton, _solver_name
 from .crank_nicolson import CrankNicolson
 
 
@@ -107,9 +108,11 @@ def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") 
     name = getattr(scheme, "name", "") or type(scheme).__name__
     span = f"from t={t0:.6g} to t={t1:.6g}{where}"
     if isinstance(scheme, _Implicit):
-        newton = "" if scheme.solver == "newton" else "the Newton solver (--solver newton), "
+        solver = _solver_name(scheme.root_finder)
+        newton = ("" if isinstance(scheme.root_finder, Newton)
+                  else "the Newton solver (--solver newton), ")
         return (
-            f"the implicit {name} step {span} did not converge (solver {scheme.solver!r}). Try "
+            f"the implicit {name} step {span} did not converge (solver {solver!r}). Try "
             f"{newton}a smaller time step, or RK4 (--scheme rk4) to see whether the model "
             "itself blows up"
         )

@@ -21,10 +21,10 @@ from .config import (
     _known_friction,
     _known_poisson,
     exact_blocks,
+    scheme_from_name,
     validate,
 )
 from ..data import Trajectories
-from ..integrate import scheme_from_name
 from ..losses import FrictionDegeneracy, JacobiPenalty, Loss, PoissonDegeneracy, SchemeResidual
 from ..structure import _registry
 from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction

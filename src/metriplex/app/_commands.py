@@ -156,8 +156,9 @@ def cmd_rollout(args: argparse.Namespace) -> None:
 
     from ..data import Trajectories
     from ..diagnostics import rollout_data
-    from ..integrate import scheme_from_name, step_failure
+    from ..integrate import step_failure
     from ..io import check_output_file, load, write, write_json
+    from .config import scheme_from_name
     from .runs import check_names, run_config
 
     out = _check_trajectory_out(args.out, args.overwrite)

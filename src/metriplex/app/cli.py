@@ -15,8 +15,7 @@ from typing import Any, NoReturn
 from ._commands import (_config_from_args, _train_summary, cmd_evaluate, cmd_reproduce,
                         cmd_rollout, cmd_simulate, cmd_train)
 from .._errors import MetriplexError
-from .._solve._implicit import SOLVER_SUMMARIES
-from ..integrate import SCHEMES, SOLVERS
+from ..integrate import ROOT_FINDERS, SCHEMES
 
 #: ``_config_from_args`` and ``_train_summary`` live in _commands; importable from here as before.
 __all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "_config_from_args", "_train_summary",
@@ -32,8 +31,8 @@ def _scheme_help(prefix: str, default: str) -> str:
 
 
 def _solver_help() -> str:
-    """``--solver``'s help, from the implicit schemes' solver table."""
-    return "implicit steps: " + " | ".join(f"{k} ({v})" for k, v in SOLVER_SUMMARIES.items())
+    """``--solver``'s help, from the registry of root finders: every name and summary."""
+    return "implicit steps: " + " | ".join(f"{k} ({v})" for k, (_, v) in ROOT_FINDERS.items())
 
 EXIT_BAD_INPUT = 2
 EXIT_FAILED = 3
@@ -189,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="predictions, in the data format: .npz, .csv, .h5 or .mat")
     p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
                                                  "with"))
-    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
+    p.add_argument("--solver", choices=tuple(ROOT_FINDERS), help=_solver_help())
     p.add_argument("--trajectories", metavar="IDS",
                    help=f"predict only these trajectory ids of DATA, {_IDS} (default: all)")
     p.add_argument("--dt", type=float, metavar="STEP", help=_DT)
@@ -206,7 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
     p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
                                                  "with"))
-    p.add_argument("--solver", choices=SOLVERS, help=_solver_help())
+    p.add_argument("--solver", choices=tuple(ROOT_FINDERS), help=_solver_help())
     p.add_argument("--horizon", type=float, help="also report the error up to t0 + HORIZON")
     p.add_argument("--trajectories", metavar="IDS",
                    help=f"evaluate only these trajectory ids of DATA, {_IDS} (default: all; "

@@ -2,7 +2,8 @@
 
 The command line and the experiment presets describe a run with a :class:`RunConfig`;
 :func:`~metriplex.app._build.build_model` and :func:`~metriplex.app._build.build_loss` turn
-it into the objects the library works with (``GenericModel``, ``Loss``). Library code itself
+it into the objects the library works with (``GenericModel``, ``Loss``), and
+:func:`scheme_from_name` turns ``--scheme`` and ``--solver`` into a scheme. Library code itself
 takes objects, never these strings.
 """
 
@@ -15,7 +16,8 @@ from typing import Any
 import numpy as np
 
 from .._errors import MetriplexError
-from ..integrate import scheme_from_name
+from .._solve._implicit import _Implicit
+from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
 from ..io import read_matrix
 from ..losses import DEGENERACY_POINTS
 from ..structure.constant import ConstantFriction, ConstantPoisson
@@ -121,6 +123,32 @@ def _choice(value: str, allowed: tuple[str, ...], option: str) -> str:
             f"{option} must be one of {', '.join(allowed)}; got {value!r}."
         )
     return head
+
+
+def scheme_from_name(name: str, *, solver: str | None = None) -> AbstractScheme:
+    """The scheme that ``--scheme`` calls ``name`` (a key of
+    :data:`~metriplex.integrate.SCHEMES`), for an implicit one solved by the root finder that
+    ``--solver`` calls ``solver`` (a key of :data:`~metriplex.integrate.ROOT_FINDERS`;
+    default: the scheme's own default, ``auto``)."""
+    if name not in SCHEMES:
+        raise MetriplexError(
+            f"unknown time-stepping scheme {name!r}; choose one of {sorted(SCHEMES)}."
+        )
+    cls = SCHEMES[name]
+    if solver is None:
+        return cls()
+    if not issubclass(cls, _Implicit):
+        implicit = ", ".join(k for k, c in SCHEMES.items() if issubclass(c, _Implicit))
+        raise MetriplexError(
+            f"--solver applies to the implicit schemes ({implicit}); "
+            f"{name!r} is explicit. Leave --solver out."
+        )
+    if solver not in ROOT_FINDERS:
+        raise MetriplexError(
+            f"--solver must be one of {', '.join(ROOT_FINDERS)}; got {solver!r}."
+        )
+    root_finder, _ = ROOT_FINDERS[solver]
+    return cls(root_finder=root_finder())
 
 
 def validate(config: RunConfig, n: int) -> None:

@@ -27,10 +27,9 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
 from ._build import build_loss, build_model, stopping_for, units_for
-from .config import RunConfig, validate
+from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import error_over_time, evaluate, rollout_data
-from ..integrate import scheme_from_name
 from ..io import check_output_folder, save, write_json
 from ..train import fit
 

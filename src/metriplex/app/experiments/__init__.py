@@ -24,13 +24,13 @@ import numpy as np
 from .. import plots
 from ..._errors import MetriplexError
 from ..._model import float_dtype, with_dtype
-from ..config import PRESETS, RunConfig, preset
+from ..config import PRESETS, RunConfig, preset, scheme_from_name
 
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
 from ...diagnostics import error_over_time, evaluate, rollout_data, time_to_error
-from ...integrate import CrankNicolson, scheme_from_name
+from ...integrate import CrankNicolson
 from ...io import write, write_json
 from ..runs import train_run
 
