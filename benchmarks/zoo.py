@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 
 from metriplex.config import RunConfig  # noqa: E402
 from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
-from metriplex.integrate import scheme_from_name  # noqa: E402
+from metriplex.config import scheme_from_name  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems.zoo import ZOO  # noqa: E402

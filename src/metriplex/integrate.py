@@ -12,9 +12,6 @@ the registries that the command line's ``--scheme`` and ``--solver`` names come 
 
 from __future__ import annotations
 
-import warnings
-
-from ._errors import MetriplexError
 from ._solve import (
     RK4,
     ROOT_FINDERS,
@@ -49,22 +46,3 @@ SCHEMES: dict[str, type[AbstractScheme]] = {
     "rk4": RK4,
 }
 
-
-def scheme_from_name(name: str) -> AbstractScheme:
-    """Deprecated: the scheme called ``name``, with its default root finder.
-
-    Names are parsed by the application layer now,
-    :func:`metriplex.app.config.scheme_from_name` (which also takes ``--solver``'s name); in
-    library code, construct the scheme (``CrankNicolson()``, ``SCHEMES[name]()``). Kept, out of
-    ``__all__``, only until ``benchmarks/zoo.py`` moves to the application layer's function.
-    """
-    warnings.warn(
-        "metriplex.integrate.scheme_from_name is deprecated: use "
-        "metriplex.app.config.scheme_from_name, or construct the scheme (SCHEMES[name]()).",
-        DeprecationWarning, stacklevel=2,
-    )
-    if name not in SCHEMES:
-        raise MetriplexError(
-            f"unknown time-stepping scheme {name!r}; choose one of {sorted(SCHEMES)}."
-        )
-    return SCHEMES[name]()
