@@ -94,12 +94,15 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCHES", 3)  # 6 trajectories: 2 a batch
     calls = []
     solve = diagnostics.solve
-    monkeypatch.setattr(diagnostics, "solve", lambda *a, **k: calls.append(1) or solve(*a, **k))
+    monkeypatch.setattr(diagnostics, "solve",
+                        lambda *a, **k: calls.append(a[2].shape) or solve(*a, **k))
     res = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--figures",
               tmp_path / "fig", "--out", tmp_path / "m.json")
     assert res.returncode == 0, res.stderr
     assert "rollouts:" in res.stderr and "/6 [" in res.stderr, res.stderr  # a bar of 6
-    assert len(calls) == 3  # three batches, once for the metrics and the figures together
+    # Three batches, once for the metrics and the figures together; then one rollout of the
+    # step check, every interval in four (the data-grid rollout is reused, not repeated).
+    assert calls == [(2, 11)] * 3 + [(6, 41)], calls
     assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == list(range(6))
     assert (tmp_path / "fig" / "error.png").exists()
     quiet = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--quiet")

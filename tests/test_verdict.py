@@ -312,3 +312,25 @@ def test_a_rigid_body_model_that_learned_nothing_is_not_called_consistent():
     v = verdict(model, data, width=32, steps=1500, learning_rate=1e-2)
     assert v["outcome"] != CONSISTENT, v["statement"]
     assert v["residual_generic_relative"] > 0.5
+
+
+def test_a_time_step_that_decides_the_prediction_gives_cannot_tell():
+    # A model is a vector field only if its predictions survive a finer step. The true damped
+    # oscillator on finely sampled data: refining the step 4x changes almost nothing. The same
+    # truth on data sampled 2.5 time units apart (2.5 samples per period): its Crank-Nicolson
+    # prediction belongs to that step, and the verdict must not judge the field by it.
+    truth = damped_oscillator(0.3)
+    fine = _oscillator_data(_damped, 6, seed=4, dt=0.05, steps=60)
+    coarse = _oscillator_data(_damped, 6, seed=4, dt=2.5, steps=12, sub=500)
+    small, why = mx.diagnostics.step_sensitivity(truth, fine, scheme=mx.CrankNicolson())
+    assert small is not None and small < 1e-2, why
+    report = mx.evaluate(truth, coarse, scheme=mx.CrankNicolson())
+    assert report["step_sensitivity"] > 0.1
+    v = verdict(truth, coarse, report=report, steps=STEPS, width=16)
+    r = _reasons(v)["step_sensitivity"]
+    assert r["passed"] is False and r["value"] == pytest.approx(report["step_sensitivity"])
+    assert v["outcome"] == CANNOT_TELL and "step_sensitivity" in v["statement"], v["statement"]
+    # A report without the check (train's own evaluation) leaves the reason out.
+    del report["step_sensitivity"]
+    assert "step_sensitivity" not in _reasons(verdict(truth, coarse, report=report,
+                                                      steps=STEPS, width=16))

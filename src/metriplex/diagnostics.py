@@ -8,7 +8,10 @@ One set of functions judges ground-truth systems and learned models alike:
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
   factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
 - the sign of the entropy production :math:`\dot S = \nabla S\cdot\dot x` at the states along
-  the model's rollouts.
+  the model's rollouts;
+- the step sensitivity: how much of the predicted motion changes when the data's time step is
+  refined (:func:`step_sensitivity`), which tells a model of the system's vector field from one
+  that is right only with its scheme at the data's step.
 
 No quantity that could not be computed is reported as a number: it is ``None`` (``null`` in
 JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
@@ -196,12 +199,15 @@ def evaluate(
     horizon: float | None = None,
     rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
     progress: bool = False,
+    step_check: bool = True,
 ) -> dict[str, Any]:
     """Metrics of ``model`` on ``data`` (see the module docstring); a JSON-able dict.
 
     ``horizon``: also report the rollout error up to ``t0 + horizon`` (``error_to_horizon``).
     ``rollout``: what :func:`rollout_data` returned for this model, data and scheme, to reuse
     (otherwise the trajectories are rolled out here, with a progress bar when ``progress``).
+    ``step_check``: also report ``step_sensitivity`` (:func:`step_sensitivity`; one more
+    rollout of a few trajectories with a 4x smaller step).
 
     ```python
     report = mx.evaluate(model, data)
@@ -302,11 +308,87 @@ def evaluate(
         report["rollout_error_to_horizon_mean"] = known(
             float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
             "a rollout failed before the horizon")
+    if step_check:
+        sensitivity, why = step_sensitivity(model, data, scheme=scheme, rollout=rollout)
+        report["step_sensitivity"] = known(sensitivity, "step_sensitivity", why)
     structure = structure_residuals(model, data.x)
     null_reasons.update(structure.pop("null_reasons"))
     report.update(structure)
     report["null_reasons"] = null_reasons
     return report
+
+
+#: Defaults of :func:`step_sensitivity`: the step is refined this many times, over the first
+#: ``SENSITIVITY_STEPS`` intervals of at most ``SENSITIVITY_TRAJECTORIES`` trajectories.
+SENSITIVITY_REFINE = 4
+SENSITIVITY_STEPS = 200
+SENSITIVITY_TRAJECTORIES = 10
+
+
+def step_sensitivity(model: GenericModel, data: Trajectories, *,
+                     scheme: AbstractScheme | None = None, refine: int = SENSITIVITY_REFINE,
+                     steps: int = SENSITIVITY_STEPS,
+                     trajectories: int = SENSITIVITY_TRAJECTORIES,
+                     rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
+                     ) -> tuple[float | None, str]:
+    r"""How much of the model's predicted motion changes when the time step is refined.
+
+    From the first state of up to ``trajectories`` trajectories (evenly spread), the model is
+    rolled out over the first ``steps`` intervals of the data's own grid, once on that grid and
+    once with every interval split into ``refine`` equal steps. Returns
+    ``(value, note)``, with
+
+    .. math:: \text{value} = \frac{\|D^{-1}(x^{\Delta t} - x^{\Delta t/r})\|}
+              {\|D^{-1}(x^{\Delta t/r} - x_0)\|}
+
+    over all compared states (``D``: the data's standard deviations), or ``None`` and why
+    when no trajectory completed both rollouts.
+
+    A model of the system's vector field, integrated by a convergent scheme, gives nearly the
+    same motion with either step (second order: a change of about :math:`(1 - 1/r^2)` of the
+    scheme's own error). A value near 1 or above says the prediction is a property of the
+    scheme at the data's step: the field was learned so that *this* scheme at *this* step
+    reproduces the data (a "modified" field, e.g. with stiff modes that the scheme damps or
+    flips), or the data's step does not resolve the dynamics. Either way the field is not a
+    trustworthy model of :math:`\dot x` between samples.
+
+    ``rollout``: what :func:`rollout_data` returned for this model, data and scheme; its
+    states on the data's grid are reused, so only the refined rollout is computed.
+    """
+    scheme = CrankNicolson() if scheme is None else scheme
+    ts, xs, lengths = data.padded()
+    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
+                     .astype(int))
+    w = int(min(steps + 1, np.min(lengths[pick])))
+    if w < 2:
+        return None, "no trajectory has two states"
+    grid = ts[pick, :w]
+    frac = np.arange(refine) / refine
+    fine = (grid[:, :-1, None] + np.diff(grid, axis=1)[:, :, None] * frac).reshape(len(pick), -1)
+    fine = np.concatenate([fine, grid[:, -1:]], axis=1)
+    dtype = float_dtype(model)
+    x0 = jnp.asarray(xs[pick, 0], dtype)
+    if rollout is None:
+        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme)
+        on_grid, failed = np.asarray(out.xs, np.float64), np.asarray(out.failed_step)
+    else:
+        on_grid = np.asarray(rollout[0].xs, np.float64)[pick, :w]
+        failed = np.asarray(rollout[0].failed_step)[pick]
+        failed = np.where(failed >= w, -1, failed)
+    refined = solve(model, x0, jnp.asarray(fine, dtype), scheme=scheme)
+    ok = (failed < 0) & (np.asarray(refined.failed_step) < 0)
+    if not ok.any():
+        return None, (f"every rollout failed, with the data's step or one {refine}x smaller "
+                      f"({len(pick)} trajectories)")
+    d = state_scale(data.x)[None, None, :]
+    pc = on_grid[ok] / d
+    pf = np.asarray(refined.xs, np.float64)[ok][:, ::refine] / d
+    start = np.asarray(xs[pick, 0], np.float64)[ok][:, None, :] / d
+    num = float(np.sqrt(np.sum((pc - pf) ** 2)))
+    den = float(np.sqrt(np.sum((pf - start) ** 2)))
+    if not np.isfinite(num) or den <= _TINY:
+        return None, "the refined rollouts do not move from their first states"
+    return num / den, (f"{int(ok.sum())} trajectories, {w - 1} steps, step refined {refine}x")
 
 
 #: A state "decreases the entropy" when dS/dt < -PRODUCTION_TOLERANCE * |D grad S| |D^-1 dx/dt|:

@@ -42,6 +42,12 @@ name                     limit          meaning
 ``training_converged``   true           training stopped on a plateau, not on a step or
                                         time cap: a model still improving says little
                                         (cannot tell; unknown without a history)
+``step_sensitivity``     0.1            refining the time step 4x changes more than 10%
+                                        of the structured model's predicted motion
+                                        (:func:`metriplex.diagnostics.step_sensitivity`):
+                                        its predictions belong to its scheme at the data's
+                                        step, not to a vector field (cannot tell; only
+                                        where the report measured it)
 ``reference_residual``   0.3            the black box leaves more than 30% of the held-out
                                         rates (9% of their power) unexplained: too few
                                         trajectories to generalise from, noise, a coarse
@@ -144,6 +150,7 @@ class Thresholds:
     jacobi: float = 0.1
     entropy_production: float = 0.01
     rounding: float = 1e-5
+    step_sensitivity: float = 0.1
 
 
 def _reason(name, value, threshold, passed, effect, note) -> dict[str, Any]:
@@ -247,6 +254,23 @@ def verdict(
         conv_pass = False
     reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
                            conv_note))
+    sens = report.get("step_sensitivity", "absent")
+    if sens != "absent":
+        sens = _finite(sens)
+        if sens is None:
+            sens_pass, sens_note = None, ("not measured: " + report.get("null_reasons", {}).get(
+                "step_sensitivity", "no rollout completed"))
+        else:
+            sens_pass = sens <= th.step_sensitivity
+            sens_note = (f"refining the time step 4x changes {_fmt(sens)} of the structured "
+                         "model's predicted motion" + (
+                             "" if sens_pass else ": its predictions hold only for its scheme "
+                             "at the data's step (a field fitted to that scheme, or a step that "
+                             "does not resolve the dynamics), so it is not a model of dx/dt "
+                             "between samples; sample more finely, or train with --scheme "
+                             "discrete-gradient or midpoint and compare"))
+        reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
+                               CANNOT_TELL, sens_note))
     fits_alone = rel_gen is not None and rel_gen <= th.tolerance
     if fits_alone:
         ref_pass, ref_note = None, (
@@ -327,7 +351,8 @@ def verdict(
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
-    sound = {"rollout_failures", "training_converged", "reference_residual"}
+    sound = {"rollout_failures", "training_converged", "reference_residual",
+             "step_sensitivity"}
     if any(r["name"] in sound for r in failed) or (ratio is None):
         outcome = CANNOT_TELL
     elif any(r["name"] == "residual_ratio" for r in failed):

@@ -134,8 +134,10 @@ def cmd_train(args: argparse.Namespace) -> None:
         )
         target = valid if valid is not None else train
         del data, train  # the evaluation holds only what it rolls out (large data: memory)
+        # The step check is left to `evaluate`: after training it would add a compilation
+        # (seconds) to every run for what the final line does not print.
         metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
-                               progress=not args.quiet)
+                               progress=not args.quiet, step_check=False)
         metrics["train_seconds"] = seconds
         metrics["evaluated_on"] = ("validation trajectories" if valid is not None
                                    else "training data")

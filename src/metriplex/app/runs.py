@@ -305,13 +305,15 @@ def check_names(run_dir: str | Path, data: Trajectories) -> None:
 def evaluate_run(model: GenericModel, data: Trajectories, *, scheme: str = "cn",
                  figures: Path | None = None,
                  horizon: float | None = None, solver: str | None = None,
-                 progress: bool = False) -> dict:
+                 progress: bool = False, step_check: bool = True) -> dict:
     """Metrics on ``data`` and, if ``figures`` is given, the standard figure set; the
     trajectories are rolled out once for both (with a progress bar when ``progress`` and the
-    data are large enough to be rolled out in batches)."""
+    data are large enough to be rolled out in batches). ``step_check``: also measure the
+    step sensitivity (:func:`~metriplex.diagnostics.step_sensitivity`)."""
     sch = scheme_from_name(scheme, solver=solver)
     rollout = rollout_data(model, data, scheme=sch, progress=progress)
-    report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout)
+    report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout,
+                      step_check=step_check)
     if figures is not None:
         report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout,
                        progress=progress)
