@@ -4,7 +4,8 @@ The application layer is ``metriplex/app/``; its modules' old paths (``metriplex
 ``metriplex.cli``, ...) are alias modules of it. A static scan of every import statement in
 ``src/metriplex`` (top level and inside functions, absolute and relative) checks that no module
 outside ``metriplex/app`` imports ``metriplex.app`` or one of the aliases, and that the alias
-modules are used by nobody inside the package (they exist for outside code only).
+modules are used by nobody inside the package (they exist for outside code only). The module
+graph has no cycle, and no module is longer than :data:`MAX_LINES` (#15).
 """
 
 from __future__ import annotations
@@ -17,6 +18,10 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "metriplex"
 #: The modules that moved to metriplex/app/ and whose old paths are aliases of them.
 ALIASES = ("config", "_build", "_selection", "runs", "plots", "cli", "_commands", "_lock",
            "experiments")
+
+#: The most lines a module under src/ may have (#15): a longer one is split by what its parts
+#: do, into private modules that the public one re-exports.
+MAX_LINES = 400
 
 #: Core modules allowed to import the application layer, and why.
 ALLOWED = {
@@ -152,3 +157,17 @@ def test_no_import_cycle_among_the_modules():
         if node not in state:
             visit(node, [node])
     assert not cycles, "import cycles:\n" + "\n".join(cycles)
+
+
+def test_no_module_is_longer_than_the_limit():
+    """Every module under src/ (the package and anything beside it) has at most
+    :data:`MAX_LINES` lines."""
+    sources = sorted(PACKAGE.parent.rglob("*.py"))
+    assert PACKAGE / "diagnostics.py" in sources
+    long = []
+    for path in sources:
+        lines = len(path.read_text(encoding="utf-8").splitlines())
+        if lines > MAX_LINES:
+            long.append(f"{path.relative_to(PACKAGE.parent.parent)}: {lines} lines")
+    assert not long, (f"modules longer than {MAX_LINES} lines; split each by what its parts do "
+                      "(a private module, re-exported):\n" + "\n".join(long))

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import equinox as eqx
 import jax
@@ -25,7 +25,11 @@ import optax
 
 from . import _checkpoint
 from ._errors import MetriplexError
+from .data import Pairs, Trajectories, state_scale, time_scale
 from .losses import Batch, Loss
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 
 @dataclasses.dataclass
@@ -290,6 +294,25 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
             f"input_noise must be in [0, 1) (a fraction of each variable's standard "
             f"deviation); got {input_noise}."
         )
+
+
+def split_validation(data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],
+                     validation: float | Trajectories | None, seed: int,
+                     ) -> tuple[Trajectories | Pairs | tuple, Trajectories | None]:
+    """``(training data, validation trajectories or None)`` as :func:`~metriplex.fit`'s
+    ``validation`` asks: a fraction of the trajectories of ``data`` (split by trajectory, with
+    ``seed``), explicit ``Trajectories``, or ``None``/``0`` for none."""
+    if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
+        return data.split(float(validation), seed=seed)
+    return data, validation if isinstance(validation, Trajectories) else None
+
+
+def default_scale(x: np.ndarray, data: Trajectories | Pairs | tuple) -> np.ndarray:
+    r""":func:`~metriplex.fit`'s default rate scale :math:`d_i/\tau`: the standard deviation of
+    the training states ``x`` over the time scale of the training ``data``."""
+    d = state_scale(x)
+    return d / time_scale(data if isinstance(data, Trajectories)
+                          else Pairs(*(np.asarray(a) for a in data)), d)
 
 
 def spread(m: int, k: int) -> np.ndarray:

@@ -27,6 +27,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._model import GenericModel, float_dtype
+# The residuals at given states (no rollout; every rollout is here), public from here.
+from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 
@@ -87,108 +89,9 @@ def _map_states(fn, xs):
     return jax.lax.map(fn, xs, batch_size=4096)
 
 
-def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256,
-                        scale: np.ndarray | None = None) -> dict:
-    r"""Degeneracy, Jacobi and PSD diagnostics at states ``x`` (subsampled to ``max_states``).
-
-    The relative residuals are :math:`|L\nabla S|/(|L|_F|\nabla S|)` and
-    :math:`|M\nabla E|/(|M|_F|\nabla E|)` (0 exact, about 0.7 and 1 at most: no degeneracy at
-    all), averaged over the states where their factors are not zero, and the Jacobi residual
-    :math:`|J|/(3|T|)` (0 for a Poisson bivector, 1 when its three cyclic terms do not cancel
-    at all). They do not depend on the units of time, of :math:`E` or of :math:`S`. With
-    ``scale`` (the per-variable data scale :math:`d`) they are measured in standardised
-    coordinates :math:`\tilde x = x/d` (:math:`\tilde L = D^{-1}LD^{-1}`,
-    :math:`\widetilde{\nabla S} = D\nabla S`), so they do not depend on the units of the state
-    either; the verdict uses these. A relative residual whose factors vanish at every state
-    (e.g. :math:`S = 0`: :math:`L\nabla S = 0` holds trivially) is ``None``, and
-    ``null_reasons`` says why.
-    """
-    x = np.asarray(x)
-    if len(x) > max_states:
-        x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
-    n = x.shape[1]
-    d = np.ones(n) if scale is None else np.asarray(scale, dtype=np.float64)
-    xj = jnp.asarray(x, float_dtype(model))
-    terms = _terms_at(model, xj)
-    f64 = lambda a: np.asarray(a, dtype=np.float64)  # noqa: E731
-    L, M = f64(terms.poisson), f64(terms.friction)
-    gE, gS = f64(terms.grad_energy), f64(terms.grad_entropy)
-    LgS = np.einsum("bij,bj->bi", L, gS)
-    MgE = np.einsum("bij,bj->bi", M, gE)
-    # Standardised coordinates (the identity without `scale`): L~ = D^-1 L D^-1, grad~ = D grad.
-    dd = d[:, None] * d[None, :]
-    Ls, Ms = L / dd[None], M / dd[None]
-    nL = np.linalg.norm(Ls, axis=(1, 2))
-    nM = np.linalg.norm(Ms, axis=(1, 2))
-    nS = np.linalg.norm(gS * d[None, :], axis=1)
-    nE = np.linalg.norm(gE * d[None, :], axis=1)
-    null_reasons: dict[str, str] = {}
-
-    def relative(num, den, key, why):
-        ok = den > 0
-        if not np.any(ok):
-            null_reasons[key] = why
-            return None
-        return float(np.mean(num[ok] / den[ok]))
-
-    rel_LS = relative(np.linalg.norm(LgS / d[None, :], axis=1), nL * nS,
-                      "degeneracy_L_gradS_relative",
-                      "L or grad S is zero at every state: L grad S = 0 holds trivially")
-    rel_MS = relative(np.linalg.norm(MgE / d[None, :], axis=1), nM * nE,
-                      "degeneracy_M_gradE_relative",
-                      "M or grad E is zero at every state: M grad E = 0 holds trivially")
-    J, T = _jacobi_parts(model, xj[: min(len(x), 64)])
-    J, T = f64(J), f64(T)
-    jac_abs = np.sqrt(np.sum(J**2, axis=(1, 2, 3)))
-    ddd = d[:, None, None] * d[None, :, None] * d[None, None, :]
-    # Each of the three cyclic terms of J has the Frobenius norm of T = (dL) L; measure J
-    # against their sum, so 1 means "no cancellation at all" and 0 an exact Poisson bracket.
-    jac_rel = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
-                       3.0 * np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
-                       "jacobi_residual_relative",
-                       "(dL) L is zero at every state (L is constant or zero): the Jacobi "
-                       "identity holds exactly")
-    eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
-    nL_raw = np.linalg.norm(L, axis=(1, 2))
-    asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL_raw, _TINY)
-    out = {
-        "degeneracy_L_gradS": float(np.mean(np.linalg.norm(LgS, axis=1))),
-        "degeneracy_M_gradE": float(np.mean(np.linalg.norm(MgE, axis=1))),
-        "degeneracy_L_gradS_relative": rel_LS,
-        "degeneracy_M_gradE_relative": rel_MS,
-        "jacobi_residual": float(np.mean(jac_abs)),
-        "jacobi_residual_relative": jac_rel,
-        "poisson_antisymmetry_relative": float(np.max(asym)),
-        "friction_min_eigenvalue": float(np.min(eig)),
-        "friction_max_eigenvalue": float(np.max(eig)),
-    }
-    out["null_reasons"] = null_reasons
-    return out
-
-
-@eqx.filter_jit
-def _terms_at(model, xs):
-    return jax.vmap(model.terms)(xs)
-
-
 @eqx.filter_jit
 def _field_and_entropy_gradient(model, xs):
     return jax.vmap(model.vector_field)(xs), jax.vmap(jax.grad(model.entropy))(xs)
-
-
-@eqx.filter_jit
-def _jacobi_parts(model: GenericModel, xs):
-    """``(J, T)`` at each state of ``xs``: the Jacobi tensor and ``T = (dL) L``, whose three
-    index permutations sum to ``J`` (see :meth:`GenericModel.jacobi_tensor`)."""
-    from ._model import _value_and_jacfwd
-
-    def one(x):
-        L, dL = _value_and_jacfwd(model.poisson_matrix, x)
-        n = x.shape[0]
-        T = (dL.reshape(n * n, n) @ L).reshape(n, n, n)
-        return T + jnp.transpose(T, (1, 2, 0)) + jnp.transpose(T, (2, 0, 1)), T
-
-    return jax.vmap(one)(xs)
 
 
 def evaluate(

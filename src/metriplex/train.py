@@ -30,18 +30,20 @@ from ._train import (
     annealing,
     cosine_schedule,
     default_optimizer,
+    default_scale,
     is_adjustable,
     learning_rate_of,
     make_chunk,
     batch_sharding,
     check_arguments,
     make_lbfgs_chunk,
+    split_validation,
     spread,
     with_learning_rate,
 )
 from ._pairs import PairRows, PairStore
 from ._validate import Plateau, RolloutCheck, rollout_score, scheme_of
-from .data import Pairs, Trajectories, state_scale, time_scale
+from .data import Pairs, Trajectories, state_scale
 from .integrate import model_size
 from .losses import CrankNicolsonResidual, Loss
 
@@ -160,21 +162,13 @@ def fit(
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
     n = getattr(model, "n", None) or model_size(model)
-    valid_data = None
     dtype = float_dtype(model, default=jnp.float32) if dtype is None else dtype
-    train_data = data
-    if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
-        train_data, valid_data = data.split(float(validation), seed=seed_split)
-    elif isinstance(validation, Trajectories):
-        valid_data = validation
+    train_data, valid_data = split_validation(data, validation, seed_split)
     # The pairs are rows of the states (no copy of them), checked once.
     train_rows = PairRows.of(train_data, n, "training")
     valid_rows = None if valid_data is None else PairRows.of(valid_data, n, "validation")
-    if scale is None:
-        d = state_scale(train_rows.x)
-        scale = d / time_scale(train_data if isinstance(train_data, Trajectories)
-                               else Pairs(*(np.asarray(a) for a in train_data)), d)
-    scale = np.asarray(scale, dtype=np.float64)
+    scale = np.asarray(default_scale(train_rows.x, train_data) if scale is None else scale,
+                       dtype=np.float64)
     model = with_dtype(model, dtype)
 
     rate_at = None  # the rate as a function of the step, where a fixed schedule sets it

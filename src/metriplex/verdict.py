@@ -119,6 +119,9 @@ from ._model import GenericModel, float_dtype
 # and train_reference are importable from here as before.
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          train_reference)
+# The checks (each a ``reasons`` entry) and the outcome names, public from here.
+from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _residual_checks,
+                              _soundness_checks, _structure_checks)
 from .data import Trajectories, state_scale, time_scale
 
 if TYPE_CHECKING:
@@ -126,10 +129,6 @@ if TYPE_CHECKING:
 
 __all__ = ["CANNOT_TELL", "CONSISTENT", "EXIT_STATUS", "NOT_CONSISTENT", "BlackBoxModel",
            "Reference", "Thresholds", "train_reference", "verdict"]
-
-CONSISTENT = "consistent"
-NOT_CONSISTENT = "not consistent"
-CANNOT_TELL = "cannot tell"
 
 #: Exit status of ``metriplex evaluate --strict`` for each outcome (2 stays "bad input").
 EXIT_STATUS = {CONSISTENT: 0, NOT_CONSISTENT: 1, CANNOT_TELL: 3}
@@ -151,21 +150,6 @@ class Thresholds:
     entropy_production: float = 0.01
     rounding: float = 1e-5
     step_sensitivity: float = 0.1
-
-
-def _reason(name, value, threshold, passed, effect, note) -> dict[str, Any]:
-    return {"name": name, "value": value, "threshold": threshold, "passed": passed,
-            "effect": effect, "note": note}
-
-
-def _fmt(v) -> str:
-    if v is None:
-        return "null"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    return f"{v:.2g}"
 
 
 def verdict(
@@ -234,120 +218,12 @@ def verdict(
     else:
         r_box, rel_box = None, None
 
-    reasons = []
-    # -- is the evidence sound? --
-    k = int(report.get("trajectories", len(data)))
-    n_failed = int(report.get("rollout_failures", 0))
-    reasons.append(_reason(
-        "rollout_failures", n_failed, 0, n_failed == 0, CANNOT_TELL,
-        f"{n_failed} of {k} rollouts of the structured model failed (blew up, or an implicit "
-        "step did not converge): its figures along rollouts are incomplete; find why with "
-        "`metriplex rollout` (try --solver newton or a smaller time step), or retrain"
-        if n_failed else f"all {k} rollouts of the structured model completed"))
-    if converged is None:
-        conv_note, conv_pass = "how training ended is not known (no training history)", None
-    elif converged:
-        conv_note, conv_pass = f"training converged ({stopped or 'on a plateau'})", True
-    else:
-        conv_note = (f"training did not converge ({stopped or 'stopped before a plateau'}): "
-                     "the model may still improve; train longer (--steps) or --resume")
-        conv_pass = False
-    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
-                           conv_note))
-    sens = report.get("step_sensitivity", "absent")
-    if sens != "absent":
-        sens = _finite(sens)
-        if sens is None:
-            sens_pass, sens_note = None, ("not measured: " + report.get("null_reasons", {}).get(
-                "step_sensitivity", "no rollout completed"))
-        else:
-            sens_pass = sens <= th.step_sensitivity
-            sens_note = (f"refining the time step 4x changes {_fmt(sens)} of the structured "
-                         "model's predicted motion" + (
-                             "" if sens_pass else ": its predictions hold only for its scheme "
-                             "at the data's step (a field fitted to that scheme, or a step that "
-                             "does not resolve the dynamics), so it is not a model of dx/dt "
-                             "between samples; sample more finely, or train with --scheme "
-                             "discrete-gradient or midpoint and compare"))
-        reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
-                               CANNOT_TELL, sens_note))
-    fits_alone = rel_gen is not None and rel_gen <= th.tolerance
-    if fits_alone:
-        ref_pass, ref_note = None, (
-            f"not needed: the structured model's own relative residual "
-            f"{_fmt(rel_gen)} is within the tolerance {th.tolerance:g}")
-    elif rel_box is None:
-        ref_pass, ref_note = False, (
-            "the unconstrained reference could not be trained (non-finite residual"
-            f"{box_note}); raise --verdict-steps or check the data")
-    else:
-        ref_pass = rel_box <= th.reference_residual
-        ref_note = (f"the unconstrained reference leaves {_fmt(rel_box)} of the observed rates "
-                    f"unexplained{box_note}" + (
-                        "" if ref_pass else ": it fits the held-out trajectories badly (too "
-                        "few trajectories to generalise from, noise, a coarse time step, or too "
-                        "short a reference training: raise --verdict-steps), so a residual "
-                        "comparison can blame neither the structure nor the data"))
-    reasons.append(_reason("reference_residual", rel_box, th.reference_residual, ref_pass,
-                           CANNOT_TELL, ref_note))
-
-    # -- the residual comparison --
-    floor = max(rel_box if rel_box is not None else 0.0, th.tolerance)
-    ratio = None if rel_gen is None else rel_gen / floor
-    if ratio is None:
-        ratio_pass, ratio_note = False, (
-            "the structured model's residual on the held-out pairs is not finite")
-    elif ref_pass is False:
-        ratio_pass, ratio_note = None, "not judged: the reference fits badly"
-    else:
-        ratio_pass = ratio <= th.residual_ratio
-        ratio_note = (f"the structured model leaves {_fmt(rel_gen)} of the held-out rates "
-                      f"unexplained, {_fmt(ratio)}x the floor (the reference's {_fmt(rel_box)}, "
-                      f"or the tolerance {th.tolerance:g} if larger)")
-    reasons.append(_reason("residual_ratio", ratio, th.residual_ratio, ratio_pass,
-                           NOT_CONSISTENT if ratio is not None else CANNOT_TELL, ratio_note))
-
-    # -- is the fitted model GENERIC? (standardised coordinates: unit-free) --
+    # The checks, in the order of the module docstring's table.
+    reasons = _soundness_checks(report, len(data), converged, stopped, th)
+    compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th)
+    reasons += compared
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
-    why_null = sr["null_reasons"]
-    for name, key, what in (
-            ("degeneracy_L_gradS", "degeneracy_L_gradS_relative", "|L grad S|/(|L||grad S|)"),
-            ("degeneracy_M_gradE", "degeneracy_M_gradE_relative", "|M grad E|/(|M||grad E|)"),
-            ("jacobi", "jacobi_residual_relative", "relative Jacobi residual |J|/(3|T|)")):
-        v = sr[key]
-        if v is None:
-            reasons.append(_reason(name, None, th.jacobi if name == "jacobi" else th.degeneracy,
-                                   True, CANNOT_TELL, why_null.get(key, "")))
-            continue
-        v = _finite(v)
-        limit = th.jacobi if name == "jacobi" else th.degeneracy
-        ok = v is not None and v <= limit
-        reasons.append(_reason(name, v, limit, ok, CANNOT_TELL,
-                               f"{what} at the data's states, standardised: "
-                               + ("the learned model is not GENERIC there, so its fit says "
-                                  "nothing about GENERIC" if not ok else "within the limit")))
-    frac = _finite(report.get("entropy_production_negative_fraction"))
-    if frac is None:
-        ent_pass, ent_note = None, ("not measured: " + report.get("null_reasons", {}).get(
-            "entropy_production_negative_fraction", "no rollout ran two steps"))
-    else:
-        ent_pass = frac <= th.entropy_production
-        ent_note = ("fraction of the states along the structured model's rollouts where its own "
-                    "flow decreases its entropy"
-                    + ("" if ent_pass else ": a second-law violation of the fitted model"))
-    reasons.append(_reason("entropy_production", frac, th.entropy_production, ent_pass,
-                           CANNOT_TELL, ent_note))
-    lo, hi = sr["friction_min_eigenvalue"], sr["friction_max_eigenvalue"]
-    big = max(abs(lo), abs(hi))
-    neg = _finite(max(0.0, -lo) / big if big > 0 else 0.0)
-    reasons.append(_reason("friction_psd", neg, th.rounding,
-                           neg is not None and neg <= th.rounding, CANNOT_TELL,
-                           "most negative eigenvalue of M relative to its largest (M must be "
-                           "positive semi-definite)"))
-    asym = _finite(sr["poisson_antisymmetry_relative"])
-    reasons.append(_reason("poisson_antisymmetry", asym, th.rounding,
-                           asym is not None and asym <= th.rounding, CANNOT_TELL,
-                           "|L + L^T|/|L| (L must be antisymmetric)"))
+    reasons += _structure_checks(sr, report, th)
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]

@@ -4,7 +4,8 @@ The command line and the experiment presets describe a run with a :class:`RunCon
 :func:`~metriplex.app._build.build_model` and :func:`~metriplex.app._build.build_loss` turn
 it into the objects the library works with (``GenericModel``, ``Loss``), and
 :func:`scheme_from_name` turns ``--scheme`` and ``--solver`` into a scheme. Library code itself
-takes objects, never these strings.
+takes objects, never these strings. What each option may say, with its help text, is in
+:mod:`metriplex.app._choices`, re-exported here.
 """
 
 from __future__ import annotations
@@ -24,6 +25,17 @@ from ..structure.constant import ConstantFriction, ConstantPoisson
 from ..structure.friction import ZeroFriction
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
 from ..structure.potential import FeatureMap, SumOf, ZeroPotential
+
+# What each option may say and its help text, importable from here as before.
+from ._choices import (  # noqa: F401
+    ENERGY_CHOICES,
+    ENTROPY_CHOICES,
+    FRICTION_CHOICES,
+    JACOBI_CHOICES,
+    POISSON_CHOICES,
+    SCHEDULES,
+    choices_help,
+)
 
 # The command line's trajectory selection, importable from here as before.
 from ._selection import (  # noqa: F401
@@ -312,40 +324,6 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     return blocks
 
 
-#: What each structure option may say (the part before any ``:``), with its help text: the
-#: command line's help and this module's checks both read these tables, so a new spelling is
-#: one line here plus its case where the block is built (``_known_*`` below, ``_build``).
-ENERGY_CHOICES = {"neural": "neural (default)"}
-ENTROPY_CHOICES = {
-    "neural": "neural (default)",
-    "sum": "sum:I,J,... (S = sum of those components, counted from 0)",
-    "zero": "zero",
-}
-POISSON_CHOICES = {
-    "neural": "neural (default)",
-    "canonical": "canonical:K (first K positions, next K momenta)",
-    "zero": "zero",
-    "casimir3": "casimir3 (n = 3, Jacobi exact)",
-    "lie-poisson": "lie-poisson (learned, linear in the state)",
-    "file": "file:PATH (a constant L from .npy, .npz or .mat)",
-}
-FRICTION_CHOICES = {
-    "neural": "neural (default)",
-    "zero": "zero",
-    "file": "file:PATH (a constant M from .npy, .npz or .mat)",
-}
-JACOBI_CHOICES = {
-    "none": "none (default)",
-    "exact": "exact",
-    "stochastic": "stochastic (random probes; see --jacobi-probes, --jacobi-samples)",
-}
-
-
-def choices_help(table: dict[str, str]) -> str:
-    """One option's choices as its help text lists them: ``a (default) | b:K (...) | ...``."""
-    return " | ".join(table.values())
-
-
 LEARNED_POISSON = ("neural", "casimir3", "lie-poisson")
 
 
@@ -376,13 +354,6 @@ def _known_entropy(config: RunConfig, n: int):
     if config.entropy == "zero":
         return ZeroPotential()
     return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
-
-
-SCHEDULES = {
-    "plateau": "cut the rate when the validation loss stops improving, stop after --lr-cuts "
-               "cuts; --steps is a cap (default)",
-    "cosine": "exactly --steps steps, the rate decayed by a cosine to 1%",
-}
 
 
 PRESETS: dict[str, dict[str, Any]] = {

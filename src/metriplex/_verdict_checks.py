@@ -1,0 +1,167 @@
+"""The checks of :func:`metriplex.verdict.verdict`, each a ``reasons`` entry.
+
+What each check means, and its limit, is documented in the docstring of
+:mod:`metriplex.verdict` (the table there); this module builds the entries in that table's
+order: the soundness of the evidence (:func:`_soundness_checks`), the residual comparison
+(:func:`_residual_checks`) and whether the fitted model is GENERIC
+(:func:`_structure_checks`). ``th`` is the verdict's :class:`metriplex.verdict.Thresholds`.
+The outcome names live here and are public from :mod:`metriplex.verdict`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ._reference import _finite
+
+CONSISTENT = "consistent"
+NOT_CONSISTENT = "not consistent"
+CANNOT_TELL = "cannot tell"
+
+
+def _reason(name, value, threshold, passed, effect, note) -> dict[str, Any]:
+    return {"name": name, "value": value, "threshold": threshold, "passed": passed,
+            "effect": effect, "note": note}
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    return f"{v:.2g}"
+
+
+def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool | None,
+                      stopped: str | None, th) -> list[dict[str, Any]]:
+    """``rollout_failures``, ``training_converged`` and, where ``report`` measured it,
+    ``step_sensitivity``: is the evidence along the structured model's rollouts sound?"""
+    reasons = []
+    k = int(report.get("trajectories", trajectories))
+    n_failed = int(report.get("rollout_failures", 0))
+    reasons.append(_reason(
+        "rollout_failures", n_failed, 0, n_failed == 0, CANNOT_TELL,
+        f"{n_failed} of {k} rollouts of the structured model failed (blew up, or an implicit "
+        "step did not converge): its figures along rollouts are incomplete; find why with "
+        "`metriplex rollout` (try --solver newton or a smaller time step), or retrain"
+        if n_failed else f"all {k} rollouts of the structured model completed"))
+    if converged is None:
+        conv_note, conv_pass = "how training ended is not known (no training history)", None
+    elif converged:
+        conv_note, conv_pass = f"training converged ({stopped or 'on a plateau'})", True
+    else:
+        conv_note = (f"training did not converge ({stopped or 'stopped before a plateau'}): "
+                     "the model may still improve; train longer (--steps) or --resume")
+        conv_pass = False
+    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
+                           conv_note))
+    sens = report.get("step_sensitivity", "absent")
+    if sens != "absent":
+        sens = _finite(sens)
+        if sens is None:
+            sens_pass, sens_note = None, ("not measured: " + report.get("null_reasons", {}).get(
+                "step_sensitivity", "no rollout completed"))
+        else:
+            sens_pass = sens <= th.step_sensitivity
+            sens_note = (f"refining the time step 4x changes {_fmt(sens)} of the structured "
+                         "model's predicted motion" + (
+                             "" if sens_pass else ": its predictions hold only for its scheme "
+                             "at the data's step (a field fitted to that scheme, or a step that "
+                             "does not resolve the dynamics), so it is not a model of dx/dt "
+                             "between samples; sample more finely, or train with --scheme "
+                             "discrete-gradient or midpoint and compare"))
+        reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
+                               CANNOT_TELL, sens_note))
+    return reasons
+
+
+def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str,
+                     th) -> tuple[list[dict[str, Any]], float | None]:
+    """``(reasons, ratio)``: the ``reference_residual`` check (does the black box fit, so that
+    a comparison can blame anyone?) and the ``residual_ratio`` check of the structured model's
+    relative residual ``rel_gen`` against the floor set by the black box's ``rel_box``."""
+    fits_alone = rel_gen is not None and rel_gen <= th.tolerance
+    if fits_alone:
+        ref_pass, ref_note = None, (
+            f"not needed: the structured model's own relative residual "
+            f"{_fmt(rel_gen)} is within the tolerance {th.tolerance:g}")
+    elif rel_box is None:
+        ref_pass, ref_note = False, (
+            "the unconstrained reference could not be trained (non-finite residual"
+            f"{box_note}); raise --verdict-steps or check the data")
+    else:
+        ref_pass = rel_box <= th.reference_residual
+        ref_note = (f"the unconstrained reference leaves {_fmt(rel_box)} of the observed rates "
+                    f"unexplained{box_note}" + (
+                        "" if ref_pass else ": it fits the held-out trajectories badly (too "
+                        "few trajectories to generalise from, noise, a coarse time step, or too "
+                        "short a reference training: raise --verdict-steps), so a residual "
+                        "comparison can blame neither the structure nor the data"))
+    reference = _reason("reference_residual", rel_box, th.reference_residual, ref_pass,
+                        CANNOT_TELL, ref_note)
+
+    floor = max(rel_box if rel_box is not None else 0.0, th.tolerance)
+    ratio = None if rel_gen is None else rel_gen / floor
+    if ratio is None:
+        ratio_pass, ratio_note = False, (
+            "the structured model's residual on the held-out pairs is not finite")
+    elif ref_pass is False:
+        ratio_pass, ratio_note = None, "not judged: the reference fits badly"
+    else:
+        ratio_pass = ratio <= th.residual_ratio
+        ratio_note = (f"the structured model leaves {_fmt(rel_gen)} of the held-out rates "
+                      f"unexplained, {_fmt(ratio)}x the floor (the reference's {_fmt(rel_box)}, "
+                      f"or the tolerance {th.tolerance:g} if larger)")
+    compared = _reason("residual_ratio", ratio, th.residual_ratio, ratio_pass,
+                       NOT_CONSISTENT if ratio is not None else CANNOT_TELL, ratio_note)
+    return [reference, compared], ratio
+
+
+def _structure_checks(sr: dict[str, Any], report: dict[str, Any],
+                      th) -> list[dict[str, Any]]:
+    """Is the fitted model GENERIC? The degeneracy, Jacobi, PSD and antisymmetry checks on
+    ``sr`` (:func:`metriplex.diagnostics.structure_residuals` in standardised coordinates:
+    unit-free) and the entropy production along the rollouts of ``report``."""
+    reasons = []
+    why_null = sr["null_reasons"]
+    for name, key, what in (
+            ("degeneracy_L_gradS", "degeneracy_L_gradS_relative", "|L grad S|/(|L||grad S|)"),
+            ("degeneracy_M_gradE", "degeneracy_M_gradE_relative", "|M grad E|/(|M||grad E|)"),
+            ("jacobi", "jacobi_residual_relative", "relative Jacobi residual |J|/(3|T|)")):
+        v = sr[key]
+        if v is None:
+            reasons.append(_reason(name, None, th.jacobi if name == "jacobi" else th.degeneracy,
+                                   True, CANNOT_TELL, why_null.get(key, "")))
+            continue
+        v = _finite(v)
+        limit = th.jacobi if name == "jacobi" else th.degeneracy
+        ok = v is not None and v <= limit
+        reasons.append(_reason(name, v, limit, ok, CANNOT_TELL,
+                               f"{what} at the data's states, standardised: "
+                               + ("the learned model is not GENERIC there, so its fit says "
+                                  "nothing about GENERIC" if not ok else "within the limit")))
+    frac = _finite(report.get("entropy_production_negative_fraction"))
+    if frac is None:
+        ent_pass, ent_note = None, ("not measured: " + report.get("null_reasons", {}).get(
+            "entropy_production_negative_fraction", "no rollout ran two steps"))
+    else:
+        ent_pass = frac <= th.entropy_production
+        ent_note = ("fraction of the states along the structured model's rollouts where its own "
+                    "flow decreases its entropy"
+                    + ("" if ent_pass else ": a second-law violation of the fitted model"))
+    reasons.append(_reason("entropy_production", frac, th.entropy_production, ent_pass,
+                           CANNOT_TELL, ent_note))
+    lo, hi = sr["friction_min_eigenvalue"], sr["friction_max_eigenvalue"]
+    big = max(abs(lo), abs(hi))
+    neg = _finite(max(0.0, -lo) / big if big > 0 else 0.0)
+    reasons.append(_reason("friction_psd", neg, th.rounding,
+                           neg is not None and neg <= th.rounding, CANNOT_TELL,
+                           "most negative eigenvalue of M relative to its largest (M must be "
+                           "positive semi-definite)"))
+    asym = _finite(sr["poisson_antisymmetry_relative"])
+    reasons.append(_reason("poisson_antisymmetry", asym, th.rounding,
+                           asym is not None and asym <= th.rounding, CANNOT_TELL,
+                           "|L + L^T|/|L| (L must be antisymmetric)"))
+    return reasons
