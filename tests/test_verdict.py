@@ -326,11 +326,12 @@ def test_a_time_step_that_decides_the_prediction_gives_cannot_tell():
     assert small is not None and small < 1e-2, why
     report = mx.evaluate(truth, coarse, scheme=mx.CrankNicolson())
     assert report["step_sensitivity"] > 0.1
-    v = verdict(truth, coarse, report=report, steps=STEPS, width=16)
+    reference = train_reference(coarse, steps=STEPS, width=16)
+    v = verdict(truth, coarse, report=report, reference=reference)
     r = _reasons(v)["step_sensitivity"]
     assert r["passed"] is False and r["value"] == pytest.approx(report["step_sensitivity"])
     assert v["outcome"] == CANNOT_TELL and "step_sensitivity" in v["statement"], v["statement"]
     # A report without the check (train's own evaluation) leaves the reason out.
     del report["step_sensitivity"]
     assert "step_sensitivity" not in _reasons(verdict(truth, coarse, report=report,
-                                                      steps=STEPS, width=16))
+                                                      reference=reference))
