@@ -5,8 +5,9 @@ Model: MLP energy and entropy, ``SkewMLPPoisson``, ``CholeskyFriction`` (all wid
 Loss: Crank–Nicolson residual + degeneracy penalty, plus
 
 - ``none``: nothing else;
-- ``exact``: ``JacobiPenalty("exact")`` (full n^3 tensor, n forward-mode tangents of L);
-- ``stochastic``: ``JacobiPenalty("stochastic", probes=1)`` (three directional derivatives);
+- ``exact``: ``JacobiPenalty(ExactJacobi())`` (full n^3 tensor, n forward-mode tangents of L);
+- ``stochastic``: ``JacobiPenalty(StochasticJacobi(probes=1))`` (three directional
+  derivatives);
 - ``projected``: no Jacobi term, but the exactly degenerate blocks
   ``ProjectedSkewMLPPoisson`` / ``ProjectedCholeskyFriction`` (the price of exact degeneracy).
 
@@ -65,9 +66,9 @@ def build(n: int, mode: str, width: int, depth: int, key):
     )
     loss = mx.CrankNicolsonResidual() + 10.0 * mx.DegeneracyPenalty()
     if mode == "exact":
-        loss = loss + mx.JacobiPenalty("exact")
+        loss = loss + mx.JacobiPenalty(mx.ExactJacobi())
     elif mode == "stochastic":
-        loss = loss + mx.JacobiPenalty("stochastic", probes=1)
+        loss = loss + mx.JacobiPenalty(mx.StochasticJacobi(probes=1))
     return model, loss
 
 

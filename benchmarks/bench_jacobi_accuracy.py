@@ -6,8 +6,8 @@ Data: Crank–Nicolson trajectories (``metriplex.solve``), dt = 2π/100, initial
 shell 0.5 ≤ |m| ≤ 1.5. Learned: an MLP energy and
 
 - ``none``: ``SkewMLPPoisson``, loss = CN residual;
-- ``exact``: ``SkewMLPPoisson``, + ``JacobiPenalty("exact")``;
-- ``stochastic``: ``SkewMLPPoisson``, + ``JacobiPenalty("stochastic", probes=1)``;
+- ``exact``: ``SkewMLPPoisson``, + ``JacobiPenalty(ExactJacobi())``;
+- ``stochastic``: ``SkewMLPPoisson``, + ``JacobiPenalty(StochasticJacobi(probes=1))``;
 - ``casimir3``: ``CasimirPoisson3`` (Jacobi by construction), loss = CN residual.
 
 Reported: the validation CN residual of the returned model (the part of the loss that fits
@@ -108,9 +108,9 @@ def build(mode: str, data: mx.Trajectories, width: int, depth: int, key) -> mx.G
 def loss_for(mode: str, weight: float) -> mx.Loss:
     loss = mx.CrankNicolsonResidual().as_loss()
     if mode == "exact":
-        loss = loss + weight * mx.JacobiPenalty("exact")
+        loss = loss + weight * mx.JacobiPenalty(mx.ExactJacobi())
     elif mode == "stochastic":
-        loss = loss + weight * mx.JacobiPenalty("stochastic", probes=1)
+        loss = loss + weight * mx.JacobiPenalty(mx.StochasticJacobi(probes=1))
     return loss
 
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import metriplex as mx
-from metriplex.losses import Batch, JacobiPenalty, stochastic_jacobi
+from metriplex.losses import Batch, ExactJacobi, JacobiPenalty, StochasticJacobi, stochastic_jacobi
 from metriplex.structure import (
     CasimirPoisson3,
     CholeskyFriction,
@@ -138,7 +138,7 @@ def test_no_nan_where_gradients_vanish():
     np.testing.assert_allclose(t.poisson[0], crit.poisson.base(a), rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(t.friction[0], crit.friction.base(a), rtol=1e-13, atol=1e-15)
     # Training gradients through the projectors, Jacobi term included, stay finite at g = 0.
-    loss = mx.DegeneracyPenalty() + JacobiPenalty("exact")
+    loss = mx.DegeneracyPenalty() + JacobiPenalty(ExactJacobi())
     batch = Batch(near, near + 0.01, jnp.full((near.shape[0],), 0.1), jnp.ones((N,)))
     grads = eqx.filter_jit(eqx.filter_grad(lambda m: loss(m, batch)[0]))(crit)
     leaves = jax.tree_util.tree_leaves(eqx.filter(grads, eqx.is_inexact_array))
@@ -237,8 +237,9 @@ def test_stochastic_jacobi_matches_exact():
     )(jnp.arange(n)))()
     np.testing.assert_allclose(Jb, J, atol=1e-12)
     batch = Batch(xs, xs, jnp.ones((4,)), scale)
-    exact = float(eqx.filter_jit(JacobiPenalty("exact"))(model, batch, None, jr.key(0)))
-    stoch = eqx.filter_jit(lambda k: JacobiPenalty("stochastic", probes=64)(model, batch, None, k))
+    exact = float(eqx.filter_jit(JacobiPenalty(ExactJacobi()))(model, batch, None, jr.key(0)))
+    stoch = eqx.filter_jit(
+        lambda k: JacobiPenalty(StochasticJacobi(probes=64))(model, batch, None, k))
     est = np.array([float(stoch(k)) for k in jr.split(jr.key(22), 60)])
     se = est.std(ddof=1) / np.sqrt(len(est))
     assert exact > 0.0
@@ -255,7 +256,7 @@ def test_jacobi_penalty_on_a_subset_of_the_batch():
 
     def penalty(samples=None):  # compiled once per setting and shape, not op by op
         kw = {} if samples is None else {"samples": samples}
-        return eqx.filter_jit(lambda m, b: JacobiPenalty("exact", **kw)(m, b, None, None))
+        return eqx.filter_jit(lambda m, b: JacobiPenalty(ExactJacobi(), **kw)(m, b, None, None))
 
     one = penalty()
     per_state = [float(one(model, Batch(xs[i:i + 1], xs[i:i + 1], jnp.ones((1,)), scale)))
@@ -267,7 +268,7 @@ def test_jacobi_penalty_on_a_subset_of_the_batch():
     full = float(penalty(100)(model, batch))
     np.testing.assert_allclose(full, np.mean(per_state), rtol=1e-12)
     with pytest.raises(mx.MetriplexError, match="samples must be >= 1"):
-        JacobiPenalty("exact", samples=0)
+        JacobiPenalty(ExactJacobi(), samples=0)
 
 
 def _all_models():

@@ -25,7 +25,7 @@ def _compiled(loss):
 def test_loss_is_zero_on_data_made_by_the_same_scheme(system, x0):
     model = system()
     data = make_data(model, x0, 0.1, 50)
-    loss = mx.CrankNicolsonResidual() + 10.0 * mx.DegeneracyPenalty() + mx.JacobiPenalty("exact")
+    loss = mx.CrankNicolsonResidual() + 10.0 * mx.DegeneracyPenalty() + mx.JacobiPenalty()
     total, parts = _compiled(loss)(model, _batch(data))
     assert float(total) < 1e-20, parts
     # ... and clearly not zero for another scheme's residual on the same data
@@ -48,8 +48,38 @@ def test_loss_composition_and_weights():
     assert loss.weights == (2.0, 3.0, 3.0)
     with pytest.raises(mx.MetriplexError, match="loss weights must be >= 0"):
         -1.0 * mx.CrankNicolsonResidual()
-    with pytest.raises(mx.MetriplexError, match="estimator must be 'exact' or 'stochastic'"):
-        mx.JacobiPenalty("approximate")
+    # Options are objects; a string (the former spelling) is explained, never silently kept.
+    assert isinstance(mx.JacobiPenalty().estimator, mx.ExactJacobi)
+    with pytest.raises(mx.MetriplexError, match=r"estimator must be a Jacobi estimator object, "
+                       r"ExactJacobi\(\) .* or StochasticJacobi\(probes=K\) .*; got "
+                       r"'stochastic'\. Write JacobiPenalty\(ExactJacobi\(\)\)"):
+        mx.JacobiPenalty("stochastic")
+    with pytest.raises(mx.MetriplexError, match=r"StochasticJacobi needs probes >= 1 .*; got "
+                                                r"probes=0\."):
+        mx.StochasticJacobi(probes=0)
+
+
+def test_the_command_line_names_are_parsed_into_objects_at_the_edge():
+    from metriplex.app._build import build_loss
+    from metriplex.app.config import RunConfig
+
+    def terms(**options):
+        return {type(t).__name__: t for t in build_loss(RunConfig(**options)).terms}
+
+    t = terms(jacobi="stochastic", jacobi_probes=3, jacobi_samples=5, degeneracy_at="midpoints")
+    assert t["JacobiPenalty"] == mx.JacobiPenalty(mx.StochasticJacobi(probes=3), samples=5)
+    assert t["PoissonDegeneracy"].at_midpoints is True
+    assert t["FrictionDegeneracy"].at_midpoints is True
+    t = terms(jacobi="exact")
+    assert t["JacobiPenalty"] == mx.JacobiPenalty(mx.ExactJacobi())
+    assert t["PoissonDegeneracy"].at_midpoints is False
+    assert t["FrictionDegeneracy"].at_midpoints is False
+    with pytest.raises(mx.MetriplexError, match=r"--jacobi must be one of none, exact, "
+                                                r"stochastic; got 'approximate'\."):
+        terms(jacobi="approximate")
+    with pytest.raises(mx.MetriplexError, match=r"--degeneracy-at must be one of states, "
+                                                r"midpoints; got 'edges'\."):
+        terms(degeneracy_at="edges")
 
 
 def test_degeneracy_penalty_detects_violation():
@@ -68,9 +98,9 @@ def test_stochastic_jacobi_is_unbiased():
                             mx.SkewMLPPoisson(5, width=16, key=jr.key(2)), mx.ZeroFriction(5))
     x = jr.normal(jr.key(1), (4, 5))
     b = Batch(x, x, jnp.ones(4), jnp.ones(5))
-    exact = float(eqx.filter_jit(lambda m, b: mx.JacobiPenalty("exact")(m, b, None, jr.key(0)))(
+    exact = float(eqx.filter_jit(lambda m, b: mx.JacobiPenalty()(m, b, None, jr.key(0)))(
         model, b))
-    est = mx.JacobiPenalty("stochastic", probes=8)
+    est = mx.JacobiPenalty(mx.StochasticJacobi(probes=8))
     draws = np.asarray(jax.jit(jax.vmap(lambda k: est(model, b, None, k)))(jr.split(jr.key(3), 200)))
     se = draws.std(ddof=1) / np.sqrt(len(draws))
     assert abs(draws.mean() - exact) < 4 * se, (draws.mean(), exact, se)
@@ -83,7 +113,7 @@ def test_loss_is_differentiable_and_jittable():
     model = mx.GenericModel(mx.MLPPotential(3, width=8, key=jr.key(0)), mx.ZeroPotential(),
                             mx.SkewMLPPoisson(3, width=8, key=jr.key(1)), mx.ZeroFriction(3))
     data = make_data(rigid_body(), rigid_x0(2), 0.1, 10)
-    loss = mx.CrankNicolsonResidual() + mx.JacobiPenalty("stochastic", probes=2)
+    loss = mx.CrankNicolsonResidual() + mx.JacobiPenalty(mx.StochasticJacobi(probes=2))
 
     @eqx.filter_jit
     def f(m, b, k):
@@ -115,7 +145,7 @@ def test_midpoint_penalties_and_shared_midpoint_terms(exact):
     def values(model, batch):
         x0, x1 = batch.x0, batch.x1
         t = jax.vmap(model.terms)(0.5 * (x0 + x1))
-        _, at_midpoints = mx.FrictionDegeneracy(where="midpoints").as_loss()(model, batch)
+        _, at_midpoints = mx.FrictionDegeneracy(at_midpoints=True).as_loss()(model, batch)
         _, at_states = mx.FrictionDegeneracy().as_loss()(model, batch)
         t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
         own = jax.vmap(dg.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, batch.dt, t0, t1)
@@ -134,5 +164,7 @@ def test_midpoint_penalties_and_shared_midpoint_terms(exact):
     # The discrete-gradient residual gives the same value whether it takes the midpoint terms
     # from the shared context (and reuses L, M of blocks that ignore the gradient) or not.
     np.testing.assert_allclose(np.asarray(shared), np.asarray(own), rtol=1e-12, atol=1e-14)
-    with pytest.raises(mx.MetriplexError, match="'states' .* or 'midpoints'"):
-        mx.PoissonDegeneracy(where="edges")
+    with pytest.raises(mx.MetriplexError, match=r"PoissonDegeneracy's at_midpoints must be True "
+                       r"\(.*midpoints.*\) or False \(.*states.*\); got 'midpoints'\. Write "
+                       r"at_midpoints=True"):
+        mx.PoissonDegeneracy("midpoints")

@@ -119,7 +119,7 @@ def nothing_written(folder):
         (["--width", "0"], r"--width must be >= 1 .*; got 0", ()),
         (["--eval-every", "-1"], r"--eval-every must be >= 1 .*; got -1", ()),
         (["--jacobi", "stochastic", "--jacobi-probes", "0"],
-         r"--jacobi-probes must be >= 1 .*; got 0", ("JacobiPenalty",)),
+         r"--jacobi-probes must be >= 1 .*; got 0", ("JacobiPenalty", "StochasticJacobi")),
         (["--checkpoint-every", "0"], r"--checkpoint-every must be >= 1 .*; got 0", ()),
         (["--poisson", "canonical:2"],
          r"--poisson canonical:2 needs 2K <= n .* n=3 variables\. Use canonical:K with "

@@ -306,7 +306,8 @@ def test_a_rigid_body_model_that_learned_nothing_is_not_called_consistent():
     model = mx.GenericModel(mx.MLPPotential(3, width=32, data=data.x, key=k[0]),
                             mx.ZeroPotential(), mx.SkewMLPPoisson(3, width=32, key=k[1]),
                             mx.ZeroFriction(3))
-    model, _ = mx.fit(model, data, loss=mx.CrankNicolsonResidual() + mx.JacobiPenalty("exact"),
+    loss = mx.CrankNicolsonResidual() + mx.JacobiPenalty(mx.ExactJacobi())
+    model, _ = mx.fit(model, data, loss=loss,
                       steps=1500, batch_size=256, learning_rate=1e-2, progress=False,
                       key=jr.key(1))
     v = verdict(model, data, width=32, steps=1500, learning_rate=1e-2)

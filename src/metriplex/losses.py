@@ -5,8 +5,13 @@ Loss terms are small objects that compose with ``+`` and scalar ``*``, as in the
 + w_J\mathcal L_{Jac}`:
 
 ```python
-loss = CrankNicolsonResidual() + 10.0 * DegeneracyPenalty() + 1.0 * JacobiPenalty("exact")
+loss = CrankNicolsonResidual() + 10.0 * DegeneracyPenalty() + 1.0 * JacobiPenalty(ExactJacobi())
 ```
+
+Options are objects, as elsewhere in the library: the Jacobi penalty takes an estimator
+(:class:`ExactJacobi`, :class:`StochasticJacobi`), and a degeneracy penalty a flag
+``at_midpoints``; the command line's spellings (``--jacobi``, ``--degeneracy-at``) are parsed
+in :mod:`metriplex.app`.
 
 Each term is a mean over the batch of a squared norm. Every term is measured in standardised
 state units: the trainer passes the per-component data scale ``d``, residuals are divided by
@@ -18,6 +23,7 @@ of a pair is shared by all terms.
 from __future__ import annotations
 
 import abc
+import numbers
 from typing import ClassVar
 from typing import NamedTuple
 
@@ -164,30 +170,28 @@ class SchemeResidual(AbstractLossTerm):
         return _sq(r, batch.scale)
 
 
-#: Where a degeneracy penalty can be evaluated (``--degeneracy-at``).
-DEGENERACY_POINTS = ("states", "midpoints")
-
-
 class _Degeneracy(AbstractLossTerm):
-    where: str = eqx.field(static=True, default="states")
+    at_midpoints: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
-        if self.where not in DEGENERACY_POINTS:
+        if not isinstance(self.at_midpoints, bool):
             raise MetriplexError(
-                f"a degeneracy penalty is evaluated at 'states' (both states of each pair) or "
-                f"'midpoints'; got where={self.where!r}."
+                f"{type(self).__name__}'s at_midpoints must be True (once per pair, at the "
+                f"midpoints (x0 + x1)/2) or False (at both states of each pair, the default); "
+                f"got {self.at_midpoints!r}. Write at_midpoints=True for the former "
+                f"where='midpoints', and leave it out for 'states'."
             )
 
     @property
     def needs_midpoints(self) -> bool:
-        return self.where == "midpoints"
+        return self.at_midpoints
 
     @staticmethod
     def _defect(t: Terms) -> jax.Array: ...
 
     def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
                  key: jax.Array) -> jax.Array:
-        if self.where == "midpoints":
+        if self.at_midpoints:
             return _sq(self._defect(ctx.mid), batch.scale)
         return 0.5 * (_sq(self._defect(ctx.terms0), batch.scale)
                       + _sq(self._defect(ctx.terms1), batch.scale))
@@ -212,7 +216,7 @@ def DiscreteGradientResidual() -> SchemeResidual:
 class PoissonDegeneracy(_Degeneracy):
     r""":math:`|L\nabla S|^2` at both states of each pair (the seed paper's weight :math:`w_S`).
 
-    ``where="midpoints"`` evaluates it once per pair at :math:`\bar x = (x_0 + x_1)/2`
+    ``at_midpoints=True`` evaluates it once per pair at :math:`\bar x = (x_0 + x_1)/2`
     instead, where the discrete-gradient and midpoint schemes evaluate the structure: with the
     discrete-gradient residual the whole loss then needs the full structure only at the
     midpoints (energies and entropies at the states), about half the cost of the step
@@ -228,7 +232,7 @@ class PoissonDegeneracy(_Degeneracy):
 
 class FrictionDegeneracy(_Degeneracy):
     r""":math:`|M\nabla E|^2` at both states of each pair (the seed paper's weight :math:`w_E`),
-    or, with ``where="midpoints"``, at their midpoints (see :class:`PoissonDegeneracy`)."""
+    or, with ``at_midpoints=True``, at their midpoints (see :class:`PoissonDegeneracy`)."""
 
     name: ClassVar[str] = "degeneracy_M"
 
@@ -237,9 +241,11 @@ class FrictionDegeneracy(_Degeneracy):
         return jnp.einsum("bij,bj->bi", t.friction, t.grad_energy)
 
 
-def DegeneracyPenalty(where: str = "states") -> Loss:
-    r"""Both degeneracy penalties, :math:`|L\nabla S|^2 + |M\nabla E|^2`."""
-    return PoissonDegeneracy(where) + FrictionDegeneracy(where)
+def DegeneracyPenalty(at_midpoints: bool = False) -> Loss:
+    r"""Both degeneracy penalties, :math:`|L\nabla S|^2 + |M\nabla E|^2`, at both states of
+    each pair or, with ``at_midpoints=True``, at their midpoints."""
+    return (PoissonDegeneracy(at_midpoints=at_midpoints)
+            + FrictionDegeneracy(at_midpoints=at_midpoints))
 
 
 def stochastic_jacobi(model: GenericModel, x: State, u: State, v: State, w: State) -> Scalar:
@@ -257,15 +263,70 @@ def stochastic_jacobi(model: GenericModel, x: State, u: State, v: State, w: Stat
     return u @ dL[0] @ v + w @ dL[1] @ u + v @ dL[2] @ w
 
 
+class AbstractJacobiEstimator(eqx.Module):
+    r"""How :class:`JacobiPenalty` estimates :math:`\sum_{ijl}(J^{ijl})^2`: :class:`ExactJacobi`
+    or :class:`StochasticJacobi`. Concrete estimators are final."""
+
+    @abc.abstractmethod
+    def mean_squared_residual(self, model: GenericModel, x: jax.Array, inv_scale: jax.Array,
+                              key: jax.Array) -> jax.Array:
+        r"""The batch mean of :math:`\sum_{ijl}(J^{ijl})^2` at the states ``x`` ``(B, n)``, in
+        standardised units: :math:`J^{ijl}` times ``inv_scale`` ``(n,)`` in each of its three
+        indices. ``key`` draws any random probes."""
+
+
+class ExactJacobi(AbstractJacobiEstimator):
+    r"""The full tensor :math:`J^{ijl}`, from the forward-mode Jacobian of :math:`L` (cost
+    :math:`\propto n^3` per sample plus ``n`` tangents of the network). ``--jacobi exact``."""
+
+    def mean_squared_residual(self, model: GenericModel, x: jax.Array, inv_scale: jax.Array,
+                              key: jax.Array) -> jax.Array:
+        J = jax.vmap(model.jacobi_tensor)(x)
+        inv = inv_scale
+        w3 = inv[:, None, None] * inv[None, :, None] * inv[None, None, :]
+        J = J * w3[None]
+        return jnp.mean(jnp.sum(J**2, axis=(1, 2, 3)))
+
+
+class StochasticJacobi(AbstractJacobiEstimator):
+    r"""Hutchinson-style: :math:`J(u,v,w)^2` with independent standard normal probes, averaged
+    over ``probes`` draws per sample (:func:`stochastic_jacobi`). Since
+    :math:`E[u_iu_{i'}] = \delta_{ii'}` for each probe, :math:`E[J(u,v,w)^2] = \sum (J^{ijl})^2`:
+    an **unbiased** estimate of the exact penalty whose cost grows like :math:`n^2`.
+    ``--jacobi stochastic --jacobi-probes K``.
+    """
+
+    probes: int = eqx.field(static=True, default=1)
+
+    def __check_init__(self):
+        if isinstance(self.probes, bool) or not isinstance(self.probes, numbers.Integral) \
+                or self.probes < 1:
+            raise MetriplexError(
+                f"StochasticJacobi needs probes >= 1 (an integer: random probe triples per "
+                f"sample); got probes={self.probes!r}."
+            )
+
+    def mean_squared_residual(self, model: GenericModel, x: jax.Array, inv_scale: jax.Array,
+                              key: jax.Array) -> jax.Array:
+        B, n = x.shape
+        probes = jr.normal(key, (3, B, self.probes, n), x.dtype) * inv_scale[None, None, None, :]
+        vals = jax.vmap(
+            jax.vmap(lambda xi, u, v, w: stochastic_jacobi(model, xi, u, v, w),
+                     in_axes=(None, 0, 0, 0)),
+        )(x, probes[0], probes[1], probes[2])
+        return jnp.mean(vals**2)
+
+
 class JacobiPenalty(AbstractLossTerm):
     r"""The Jacobi-identity penalty :math:`\sum_{ijl}(J^{ijl})^2` at the first state of each pair.
 
-    - ``"exact"``: the full tensor, from the forward-mode Jacobian of :math:`L` (cost
-      :math:`\propto n^3` per sample plus ``n`` tangents of the network);
-    - ``"stochastic"``: Hutchinson-style, :math:`J(u,v,w)^2` with independent standard normal
-      probes, averaged over ``probes`` draws. Since :math:`E[u_iu_{i'}] = \delta_{ii'}` for each
-      probe, :math:`E[J(u,v,w)^2] = \sum (J^{ijl})^2`: an **unbiased** estimate of the exact
-      penalty whose cost grows like :math:`n^2`.
+    ``estimator``: an :class:`AbstractJacobiEstimator`, :class:`ExactJacobi` (default; the full
+    tensor, cost :math:`\propto n^3`) or :class:`StochasticJacobi` (``probes`` random triples
+    per sample, unbiased, cost :math:`\propto n^2`):
+
+    ```python
+    JacobiPenalty(StochasticJacobi(probes=2), samples=256)
+    ```
 
     ``samples``: evaluate the penalty on only ``samples`` pairs of each batch, every k-th one
     (``None``: all). Training batches are uniform random draws, so these are a random subset
@@ -274,19 +335,19 @@ class JacobiPenalty(AbstractLossTerm):
     the data fit, so it can do with fewer samples than the residual.
     """
 
-    estimator: str = eqx.field(static=True, default="exact")
-    probes: int = eqx.field(static=True, default=1)
+    estimator: AbstractJacobiEstimator = ExactJacobi()
     samples: int | None = eqx.field(static=True, default=None)
     name: ClassVar[str] = "jacobi"
 
     def __check_init__(self):
-        if self.estimator not in ("exact", "stochastic"):
+        if not isinstance(self.estimator, AbstractJacobiEstimator):
             raise MetriplexError(
-                f"JacobiPenalty estimator must be 'exact' or 'stochastic'; got "
-                f"{self.estimator!r}."
+                f"JacobiPenalty's estimator must be a Jacobi estimator object, ExactJacobi() "
+                f"(the default) or StochasticJacobi(probes=K) (in metriplex); got "
+                f"{self.estimator!r}. Write JacobiPenalty(ExactJacobi()) for the former "
+                f"'exact' and JacobiPenalty(StochasticJacobi(probes=K)) for 'stochastic' with "
+                f"probes=K."
             )
-        if self.probes < 1:
-            raise MetriplexError(f"JacobiPenalty needs probes >= 1; got {self.probes}.")
         if self.samples is not None and self.samples < 1:
             raise MetriplexError(
                 f"JacobiPenalty samples must be >= 1 (or None for the whole batch); got "
@@ -300,16 +361,4 @@ class JacobiPenalty(AbstractLossTerm):
             # Every k-th pair: a random subset of a random training batch, and still spread
             # over all trajectories in the evenly spaced validation batch.
             x = x[:: x.shape[0] // self.samples][: self.samples]
-        inv = 1.0 / batch.scale
-        if self.estimator == "exact":
-            J = jax.vmap(model.jacobi_tensor)(x)
-            w3 = inv[:, None, None] * inv[None, :, None] * inv[None, None, :]
-            J = J * w3[None]
-            return jnp.mean(jnp.sum(J**2, axis=(1, 2, 3)))
-        B, n = x.shape
-        probes = jr.normal(key, (3, B, self.probes, n), x.dtype) * inv[None, None, None, :]
-        vals = jax.vmap(
-            jax.vmap(lambda xi, u, v, w: stochastic_jacobi(model, xi, u, v, w),
-                     in_axes=(None, 0, 0, 0)),
-        )(x, probes[0], probes[1], probes[2])
-        return jnp.mean(vals**2)
+        return self.estimator.mean_squared_residual(model, x, 1.0 / batch.scale, key)

@@ -9,11 +9,14 @@ from __future__ import annotations
 import jax
 import jax.random as jr
 
+from .._errors import MetriplexError
 from .._model import GenericModel
 from .._units import Units
 from .config import (
+    DEGENERACY_POINTS,
     FEATURE_BLOCKS,
     FEATURES,
+    JACOBI_CHOICES,
     LEARNED_POISSON,
     RunConfig,
     _feature_blocks,
@@ -25,7 +28,16 @@ from .config import (
     validate,
 )
 from ..data import Trajectories
-from ..losses import FrictionDegeneracy, JacobiPenalty, Loss, PoissonDegeneracy, SchemeResidual
+from ..losses import (
+    AbstractJacobiEstimator,
+    ExactJacobi,
+    FrictionDegeneracy,
+    JacobiPenalty,
+    Loss,
+    PoissonDegeneracy,
+    SchemeResidual,
+    StochasticJacobi,
+)
 from ..structure import _registry
 from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction
 from ..structure.lie_poisson import LiePoisson
@@ -107,18 +119,38 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     loss = config.w_traj * SchemeResidual(scheme_from_name(config.scheme))
     exact_L, exact_M = exact_blocks(config)
     learned_L = config.poisson in LEARNED_POISSON
+    at_midpoints = _at_midpoints(config)
     if not exact_L and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
         loss = loss + config.w_degeneracy_L * (e / s) ** 2 * PoissonDegeneracy(
-            config.degeneracy_at)
+            at_midpoints=at_midpoints)
     if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
-            config.degeneracy_at)
+            at_midpoints=at_midpoints)
     if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
             and config.w_jacobi > 0:
         loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(
-            config.jacobi, probes=config.jacobi_probes, samples=config.jacobi_samples
+            _jacobi_estimator(config), samples=config.jacobi_samples
         )
     return loss
+
+
+def _at_midpoints(config: RunConfig) -> bool:
+    """The degeneracy penalties' ``at_midpoints`` from ``--degeneracy-at states | midpoints``."""
+    if config.degeneracy_at not in DEGENERACY_POINTS:
+        raise MetriplexError(f"--degeneracy-at must be one of {', '.join(DEGENERACY_POINTS)}; "
+                             f"got {config.degeneracy_at!r}.")
+    return config.degeneracy_at == "midpoints"
+
+
+def _jacobi_estimator(config: RunConfig) -> AbstractJacobiEstimator:
+    """The Jacobi penalty's estimator from ``--jacobi exact | stochastic`` and
+    ``--jacobi-probes``."""
+    if config.jacobi == "exact":
+        return ExactJacobi()
+    if config.jacobi == "stochastic":
+        return StochasticJacobi(probes=config.jacobi_probes)
+    raise MetriplexError(f"--jacobi must be one of {', '.join(JACOBI_CHOICES)}; got "
+                         f"{config.jacobi!r}.")
 
 
 # Adam at 1e-2 (cosine-decayed, see train.default_optimizer) with batches of 256 pairs: a sweep

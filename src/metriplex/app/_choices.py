@@ -3,7 +3,8 @@
 The structure options (``--energy``, ``--entropy``, ``--poisson``, ``--friction``,
 ``--jacobi``) and ``--schedule``: the command line's help (:mod:`metriplex.app.cli`) and the
 checks of :func:`metriplex.app.config.validate` both read these tables, which
-:mod:`metriplex.app.config` re-exports.
+:mod:`metriplex.app.config` re-exports, as it does :data:`DEGENERACY_POINTS`
+(``--degeneracy-at``).
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ JACOBI_CHOICES = {
     "exact": "exact",
     "stochastic": "stochastic (random probes; see --jacobi-probes, --jacobi-samples)",
 }
+
+#: Where soft degeneracy penalties are evaluated (``--degeneracy-at``): ``midpoints`` is the
+#: losses' ``at_midpoints=True``.
+DEGENERACY_POINTS = ("states", "midpoints")
 
 
 def choices_help(table: dict[str, str]) -> str:

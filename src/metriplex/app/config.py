@@ -20,7 +20,6 @@ from .._errors import MetriplexError
 from .._solve._implicit import _Implicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
 from ..io import read_matrix
-from ..losses import DEGENERACY_POINTS
 from ..structure.constant import ConstantFriction, ConstantPoisson
 from ..structure.friction import ZeroFriction
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
@@ -28,6 +27,7 @@ from ..structure.potential import FeatureMap, SumOf, ZeroPotential
 
 # What each option may say and its help text, importable from here as before.
 from ._choices import (  # noqa: F401
+    DEGENERACY_POINTS,
     ENERGY_CHOICES,
     ENTROPY_CHOICES,
     FRICTION_CHOICES,
