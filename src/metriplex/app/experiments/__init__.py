@@ -23,13 +23,13 @@ import numpy as np
 
 from .. import plots
 from ..._errors import MetriplexError
-from ..._model import float_dtype, with_dtype
+from ..._model import with_dtype
 from ..config import PRESETS, RunConfig, preset, scheme_from_name
 
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
-from ...diagnostics import error_over_time, evaluate, rollout_data, time_to_error
+from ...diagnostics import _potential_along, error_over_time, evaluate, rollout_data, time_to_error
 from ...integrate import CrankNicolson
 from ...io import write, write_json
 from ..runs import train_run
@@ -182,9 +182,15 @@ def run_experiment(
     rollout_scheme = config.scheme if defaults else exp.rollout_scheme
     scheme = scheme_from_name(rollout_scheme)
     horizon = exp.horizon
-    metrics = evaluate(model, test, scheme=scheme, horizon=horizon)
+    # Each model's test rollouts are computed once, for its metrics and for the figures.
+    rollout = rollout_data(model, test, scheme=scheme)
+    truth_rollout = rollout_data(system.model, test, scheme=CrankNicolson())
+    metrics = evaluate(model, test, scheme=scheme, horizon=horizon, rollout=rollout)
+    # Of the truth's report only the four figures below are kept: no step check (one more
+    # compiled rollout, with a 4x finer step).
     truth = evaluate(jax.tree_util.tree_map(lambda a: a, system.model), test,
-                     scheme=CrankNicolson(), horizon=horizon)
+                     scheme=CrankNicolson(), horizon=horizon, rollout=truth_rollout,
+                     step_check=False)
     metrics["ground_truth_cn"] = {
         k: truth[k] for k in ("rollout_error_mean", "energy_relative_drift", "entropy_min_step",
                               "rollout_error_to_horizon_mean") if k in truth
@@ -200,7 +206,8 @@ def run_experiment(
     )
     untrained = _untrained_error(config, train, test, scheme, horizon)
     metrics["untrained_rollout_error"] = untrained
-    metrics.update(_figures_and_gauge(exp, system, model, test, out / "figures", scheme))
+    metrics.update(_figures_and_gauge(exp, system, model, test, out / "figures", rollout,
+                                      truth_rollout))
     metrics["bars"] = {
         k: {"target": v, "value": metrics.get(k), "met": _met(k, metrics.get(k), v)}
         for k, v in exp.bars.items()
@@ -237,7 +244,8 @@ def _untrained_error(config: RunConfig, train, test, scheme, horizon) -> float:
 
     model = build_model(config, train, key=jr.split(jr.key(config.seed))[0])
     model = with_dtype(model, jnp.float32)
-    r = evaluate(model, test, scheme=scheme, horizon=horizon)
+    # Only the rollout error is kept: no step check.
+    r = evaluate(model, test, scheme=scheme, horizon=horizon, step_check=False)
     v = r["rollout_error_to_horizon_mean"] if horizon else r["rollout_error_mean"]
     return float(v) if math.isfinite(v) else float("inf")
 
@@ -254,8 +262,12 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
     """
     pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
-    dtype = float_dtype(model)
     slope = abs(fit["slope"])
+    # Both energies at every state of every rollout at once, each one compiled call (op by
+    # op, each operation of the model would compile on its own for every length).
+    E_learned = _potential_along(model, model.energy, pred)
+    E_true = _potential_along(system.model, system.model.energy, pred)
+    E_start = _potential_along(system.model, system.model.energy, np.asarray(xs)[:, 0])
     gauge, true = [], []
     for k, T in enumerate(lengths):
         T = int(failed[k]) if failed[k] >= 0 else int(T)
@@ -263,10 +275,8 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
             gauge.append(float("inf"))
             true.append(float("inf"))
             continue
-        p = jnp.asarray(pred[k, :T])
-        E_l = np.asarray(jax.vmap(model.energy)(p.astype(dtype)), dtype=np.float64)
-        E_t = np.asarray(jax.vmap(system.model.energy)(p), dtype=np.float64)
-        E0 = max(abs(float(system.model.energy(jnp.asarray(xs[k, 0])))), 1e-300)
+        E_l, E_t = E_learned[k, :T], E_true[k, :T]
+        E0 = max(abs(float(E_start[k])), 1e-300)
         # Up to a failed step, like evaluate()'s raw drift; failures are counted separately.
         gauge.append(float(np.max(np.abs(E_l - E_l[0]))) / max(slope, 1e-300) / E0)
         true.append(float(np.max(np.abs(E_t - E_t[0]))) / E0)
@@ -274,8 +284,11 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
             "true_energy_relative_drift": float(np.max(true))}
 
 
-def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[str, Any]:
-    out, xs, lengths = rollout_data(model, test, scheme=scheme)
+def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
+                       truth_rollout) -> dict[str, Any]:
+    """The figures, the energy and entropy gauge fits and the gauge-fixed drifts, from the
+    learned model's and the truth's test rollouts (what ``rollout_data`` returned)."""
+    out, xs, lengths = rollout
     k = 0
     T = int(lengths[k])
     ts = np.asarray(out.ts, dtype=np.float64)[k, :T]
@@ -303,19 +316,18 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
                           xs[j, : lengths[j]])
             for j in range(len(lengths))
         ]
-    truth_out = rollout_data(system.model, test, scheme=CrankNicolson())[0]
+    truth_out = truth_rollout[0]
     ref = error_over_time(np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs)
     err = error_over_time(pred, obs)  # NaN after a failure: the figure marks it
     plots.save_figure(plots.error_over_time(ts, err, reference=ref, failed_at=failed_at),
                       folder / "error", t=ts, learned=err, ground_truth_cn=ref)
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
-    x_all = jnp.asarray(test.x)
-    dtype = float_dtype(model)
-    E_l = np.asarray(jax.vmap(model.energy)(x_all.astype(dtype)), dtype=np.float64)
-    S_l = np.asarray(jax.vmap(model.entropy)(x_all.astype(dtype)), dtype=np.float64)
-    E_t = np.asarray(jax.vmap(system.model.energy)(x_all), dtype=np.float64)
-    S_t = np.asarray(jax.vmap(system.model.entropy)(x_all), dtype=np.float64)
+    x_all = np.asarray(test.x)
+    E_l = _potential_along(model, model.energy, x_all)
+    S_l = _potential_along(model, model.entropy, x_all)
+    E_t = _potential_along(system.model, system.model.energy, x_all)
+    S_t = _potential_along(system.model, system.model.entropy, x_all)
     result["energy_gauge_fit"] = affine_fit(E_t, E_l)
     result.update(_energy_drifts(system, model, out, xs, lengths, result["energy_gauge_fit"]))
     plots.save_figure(plots.gauge_fit(E_t, E_l, label="E"), folder / "energy_fit", true=E_t,
@@ -327,8 +339,8 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme) -> dict[s
     m = test.trajectory == test.ids[k]
     fe, fs = result["energy_gauge_fit"], result.get("entropy_gauge_fit")
     # NaN after a failure (not the potentials of a zero state).
-    E_k = np.asarray(jax.vmap(model.energy)(jnp.asarray(pred, dtype)), dtype=np.float64)
-    S_k = np.asarray(jax.vmap(model.entropy)(jnp.asarray(pred, dtype)), dtype=np.float64)
+    E_k = _potential_along(model, model.energy, pred)
+    S_k = _potential_along(model, model.entropy, pred)
     E_fit = fe["slope"] * E_t[m] + fe["offset"]
     S_fit = None if fs is None else fs["slope"] * S_t[m] + fs["offset"]
     plots.save_figure(plots.energy_entropy(ts, E_k, S_k, E_true=E_fit, S_true=S_fit,
