@@ -54,21 +54,23 @@ def test_quick_experiment_learns(name, tmp_path):
 
 
 def test_experiment_pipeline_writes_everything(tmp_path):
-    """The whole ``run_experiment`` path at a tiny size (5 trajectories of 20 steps, 20 training
-    steps): what it writes, not how well it learns (that is ``test_quick_experiment_learns``,
-    marked slow). The energetic pendulum takes the most branches: a horizon, the
-    discrete-gradient rollout, the positions figure and the time to 10% error. The test data
-    have the training data's size (5 x 20, other initial states), so generating both is one
-    compiled program."""
+    """The whole ``run_experiment`` path at a tiny size (25 trajectories of 20 steps, 20
+    training steps): what it writes, not how well it learns (that is
+    ``test_quick_experiment_learns``, marked slow). The energetic pendulum takes the most
+    branches: a horizon, the discrete-gradient rollout, the positions figure and the time to
+    10% error. The 5 validation trajectories (20% of 25) have the test data's size (5 x 20,
+    other initial states): the held-out rollouts during training and the test rollouts of the
+    learned and the untrained model are one compiled program."""
     name = "pendulum-energetic"
     out = tmp_path / name
     metrics = run_experiment(name, quick=True, out=out, progress=False,
-                             size=Size(trajectories=5, steps=20, train_steps=20,
+                             size=Size(trajectories=25, steps=20, train_steps=20,
                                        test_trajectories=5, test_steps=20))
     key = "rollout_error_to_horizon_mean"
     assert math.isfinite(metrics[key]) and math.isfinite(metrics["untrained_rollout_error"])
     assert metrics["rollout_failures"] == 0
     assert metrics["size"]["train_steps"] == 20 and metrics["test_trajectories"] == 5
+    assert metrics["validation_trajectories"] == 5 and metrics["train_trajectories"] == 20
     assert len(metrics["time_to_10pct_error"]) == 5
     saved = json.loads((out / "metrics.json").read_text())
     assert saved[key] == pytest.approx(metrics[key])
