@@ -188,7 +188,11 @@ def make_lbfgs_chunk(loss: Loss, static: Any) -> tuple[
     smaller pair residual in few iterations; :func:`~metriplex.fit` keeps its result only where
     the validation score improves.
     """
-    solver = optax.lbfgs()
+    base = optax.lbfgs()
+    # Its initial state holds weakly typed scalars (the line search's info) that every
+    # iteration returns strongly typed: typed once here, the chunk compiles once, not twice.
+    solver = base._replace(init=lambda params: jax.tree_util.tree_map(
+        lambda a: a.astype(a.dtype) if eqx.is_array(a) else a, base.init(params)))
 
     def chunk(params, opt_state, length, pairs, key):
         def value(p):
