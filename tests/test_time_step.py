@@ -132,7 +132,8 @@ def test_the_command_line_way_out(short_time_vector, tmp_path):
     pred = mx.read(tmp_path / "p.npz")
     assert list(pred.ids) == [1, 2]
     np.testing.assert_allclose(pred.t, np.tile(np.arange(T) * 0.1, 2), rtol=1e-15)
+    # The same trajectories as the rollout: evaluate reuses its compiled rollout.
     res = run("evaluate", run_dir, short_time_vector, "--dt", "0.1", "--no-verdict", "--quiet",
-              "--out", tmp_path / "m.json")
+              "--trajectories", "1-2", "--out", tmp_path / "m.json")
     assert res.returncode == 0, res.stderr
-    assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == [0, 1, 2]
+    assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == [1, 2]
