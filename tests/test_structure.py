@@ -15,12 +15,24 @@ def _states(n, k=64, seed=0):
     return jr.normal(jr.key(seed), (k, n)) * 2.0
 
 
+# The blocks at many states in one compiled call each (op by op, every operation of a
+# network would compile on its own).
+@eqx.filter_jit
+def _at_states(block, xs):
+    return jax.vmap(lambda x: block(x, None))(xs)
+
+
+@eqx.filter_jit
+def _factors(friction, xs):
+    return jax.vmap(friction.factor)(xs)
+
+
 @pytest.mark.parametrize("n", [2, 3, 10])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_learned_poisson_is_antisymmetric(n, seed):
     scaling = mx.Scaling.from_data(np.asarray(_states(n, 32, seed + 7)) * 3.0 + 1.0)
     L = mx.SkewMLPPoisson(n, width=16, scaling=scaling, key=jr.key(seed))
-    Ls = jax.vmap(lambda x: L(x, None))(_states(n, seed=seed))
+    Ls = _at_states(L, _states(n, seed=seed))
     assert Ls.shape == (64, n, n)
     np.testing.assert_array_equal(np.asarray(Ls), -np.asarray(jnp.swapaxes(Ls, 1, 2)))
     assert float(jnp.max(jnp.abs(Ls))) > 1e-3  # not trivially zero
@@ -39,11 +51,11 @@ def test_poisson_uses_exactly_n_n_minus_1_over_2_outputs():
 @pytest.mark.parametrize("n", [1, 4, 10])
 def test_learned_friction_is_symmetric_psd(n):
     M = mx.CholeskyFriction(n, width=16, key=jr.key(3))
-    Ms = np.asarray(jax.vmap(lambda x: M(x, None))(_states(n)))
+    Ms = np.asarray(_at_states(M, _states(n)))
     np.testing.assert_allclose(Ms, np.swapaxes(Ms, 1, 2), atol=1e-15)
     eig = np.linalg.eigvalsh(Ms)
     assert eig.min() >= -1e-12 * max(1.0, eig.max())
-    B = np.asarray(jax.vmap(M.factor)(_states(n)))
+    B = np.asarray(_factors(M, _states(n)))
     np.testing.assert_array_equal(B, np.tril(B))
 
 
@@ -74,6 +86,11 @@ def test_canonical_poisson_layout_and_errors():
         mx.CanonicalPoisson(10, 6)
 
 
+@eqx.filter_jit
+def _jacobi_tensors(model, xs):
+    return jax.vmap(model.jacobi_tensor)(xs)
+
+
 def test_jacobi_zero_for_lie_poisson_and_constant_nonzero_for_random():
     def lie(m):
         return jnp.array([[0.0, -m[2], m[1]], [m[2], 0.0, -m[0]], [-m[1], m[0], 0.0]])
@@ -84,11 +101,11 @@ def test_jacobi_zero_for_lie_poisson_and_constant_nonzero_for_random():
                             mx.ZeroFriction(6))
     learned = mx.GenericModel(mx.ZeroPotential(), mx.ZeroPotential(),
                               mx.SkewMLPPoisson(4, width=16, key=jr.key(0)), mx.ZeroFriction(4))
-    for x in _states(3, 16):
-        assert float(jnp.max(jnp.abs(rigid.jacobi_tensor(x)))) < 1e-13
-    for x in _states(6, 4):
-        assert float(jnp.max(jnp.abs(const.jacobi_tensor(x)))) == 0.0
-    J = jax.vmap(learned.jacobi_tensor)(_states(4, 16))
+    # Each model's tensor at all its states in one compiled call (op by op, every operation
+    # of the tensor would compile on its own).
+    assert float(jnp.max(jnp.abs(_jacobi_tensors(rigid, _states(3, 16))))) < 1e-13
+    assert float(jnp.max(jnp.abs(_jacobi_tensors(const, _states(6, 4))))) == 0.0
+    J = _jacobi_tensors(learned, _states(4, 16))
     assert float(jnp.min(jnp.sqrt(jnp.sum(J**2, axis=(1, 2, 3))))) > 1e-4
 
 
