@@ -24,6 +24,13 @@ from metriplex.integrate import (
 DG = DiscreteGradient()
 
 
+@eqx.filter_jit
+def _along(fn, xs):
+    """``fn`` at every state of rollouts ``xs`` (batch, time, n), one compiled call (op by op,
+    every operation of a network would compile on its own)."""
+    return jax.vmap(jax.vmap(fn))(xs)
+
+
 def random_model(n, seed, *, poisson=mx.SkewMLPPoisson, friction=mx.CholeskyFriction):
     k = jr.split(jr.key(seed), 4)
     return mx.GenericModel(
@@ -166,8 +173,8 @@ def test_random_learned_models_conserve_energy_and_produce_entropy(label, poisso
     ts = jnp.linspace(0.0, 50.0, 1001)
     out = solve(model, x0, ts, scheme=DG)
     assert out.ok
-    E = np.asarray(jax.vmap(jax.vmap(model.energy))(out.xs))
-    S = np.asarray(jax.vmap(jax.vmap(model.entropy))(out.xs))
+    E = np.asarray(_along(model.energy, out.xs))
+    S = np.asarray(_along(model.entropy, out.xs))
     drift = np.max(np.abs(E - E[:, :1]), axis=1) / np.maximum(np.abs(E[:, 0]), 1e-3)
     assert np.all(drift < 1e-10), drift
     dS = np.diff(S, axis=1)
@@ -202,7 +209,7 @@ def test_second_order_on_a_dissipative_problem_and_exact_balance(damped_rollouts
     errors = np.linalg.norm(np.asarray(out.xs[:4, -1]) - ref[None, :], axis=1)
     slope = np.polyfit(np.log(HORIZON / np.asarray(STEPS)), np.log(errors), 1)[0]
     assert abs(slope - 2.0) < 0.15, (slope, errors)
-    E = np.asarray(jax.vmap(jax.vmap(_damped_energy))(out.xs))
+    E = np.asarray(_along(_damped_energy, out.xs))
     assert np.max(np.abs(E - E[:, :1])) < 1e-13
     s = np.asarray(out.xs[..., 2])
     assert np.min(np.diff(s, axis=1)) >= 0.0 and s[0, -1] - s[0, 0] > 0.1
@@ -224,10 +231,10 @@ def test_spnn_pendulum_energy_at_the_published_dt():
     for scheme in (DG, CrankNicolson()):
         out = solve(model, x0, ts, scheme=scheme)
         assert out.ok, scheme.name
-        E = np.asarray(jax.vmap(jax.vmap(model.energy))(out.xs))
+        E = np.asarray(_along(model.energy, out.xs))
         drift[scheme.name] = np.max(np.abs(E - E[:, :1]) / np.abs(E[:, :1]))
         if scheme is DG:
-            S = np.asarray(jax.vmap(jax.vmap(model.entropy))(out.xs))
+            S = np.asarray(_along(model.entropy, out.xs))
             assert np.min(np.diff(S, axis=1)) >= -1e-15
     assert drift["discrete-gradient"] <= 1e-9, drift
     assert drift["cn"] >= 1e-2, drift
@@ -274,7 +281,7 @@ def test_trained_model_rolls_out_with_its_energy_conserved(damped_rollouts):
     x0 = jnp.asarray(damped_rollouts.xs[4:6, 0])
     out = solve(trained, x0, jnp.linspace(0.0, 20.0, 201), scheme=DG)
     assert out.ok
-    E = np.asarray(jax.vmap(jax.vmap(trained.energy))(out.xs))
+    E = np.asarray(_along(trained.energy, out.xs))
     assert np.max(np.abs(E - E[:, :1]) / np.abs(E[:, :1])) <= 1e-9
     S = np.asarray(out.xs[..., 2])
     assert np.min(np.diff(S, axis=1)) >= -1e-15
