@@ -31,3 +31,17 @@ class TrainingDiverged(MetriplexError):
         super().__init__(message)
         self.model = model
         self.history = history
+
+
+def expect_instance(value: Any, kind: type, *, what: str, expected: str, fix: str = "") -> None:
+    """Raise a :class:`MetriplexError` unless ``value`` is a ``kind``.
+
+    For an option that must be an object of its kind (a root finder, a Jacobi estimator) or a
+    flag, checked where it is set (a module's ``__check_init__``). The message says the rule
+    (``what`` must be ``expected``), the value received and, when given, the ``fix``: often
+    how to write a former string option.
+    """
+    if not isinstance(value, kind):
+        raise MetriplexError(
+            f"{what} must be {expected}; got {value!r}." + (f" {fix}" if fix else "")
+        )

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 
-from ._errors import MetriplexError
+from ._errors import MetriplexError, expect_instance
 from ._model import GenericModel, Terms
 from ._types import Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
@@ -174,13 +174,13 @@ class _Degeneracy(AbstractLossTerm):
     at_midpoints: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
-        if not isinstance(self.at_midpoints, bool):
-            raise MetriplexError(
-                f"{type(self).__name__}'s at_midpoints must be True (once per pair, at the "
-                f"midpoints (x0 + x1)/2) or False (at both states of each pair, the default); "
-                f"got {self.at_midpoints!r}. Write at_midpoints=True for the former "
-                f"where='midpoints', and leave it out for 'states'."
-            )
+        expect_instance(
+            self.at_midpoints, bool, what=f"{type(self).__name__}'s at_midpoints",
+            expected="True (once per pair, at the midpoints (x0 + x1)/2) or False (at both "
+            "states of each pair, the default)",
+            fix="Write at_midpoints=True for the former where='midpoints', and leave it out "
+            "for 'states'.",
+        )
 
     @property
     def needs_midpoints(self) -> bool:
@@ -340,14 +340,13 @@ class JacobiPenalty(AbstractLossTerm):
     name: ClassVar[str] = "jacobi"
 
     def __check_init__(self):
-        if not isinstance(self.estimator, AbstractJacobiEstimator):
-            raise MetriplexError(
-                f"JacobiPenalty's estimator must be a Jacobi estimator object, ExactJacobi() "
-                f"(the default) or StochasticJacobi(probes=K) (in metriplex); got "
-                f"{self.estimator!r}. Write JacobiPenalty(ExactJacobi()) for the former "
-                f"'exact' and JacobiPenalty(StochasticJacobi(probes=K)) for 'stochastic' with "
-                f"probes=K."
-            )
+        expect_instance(
+            self.estimator, AbstractJacobiEstimator, what="JacobiPenalty's estimator",
+            expected="a Jacobi estimator object, ExactJacobi() (the default) or "
+            "StochasticJacobi(probes=K) (in metriplex)",
+            fix="Write JacobiPenalty(ExactJacobi()) for the former 'exact' and "
+            "JacobiPenalty(StochasticJacobi(probes=K)) for 'stochastic' with probes=K.",
+        )
         if self.samples is not None and self.samples < 1:
             raise MetriplexError(
                 f"JacobiPenalty samples must be >= 1 (or None for the whole batch); got "

@@ -9,7 +9,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from .._errors import MetriplexError
+from .._errors import expect_instance
 from .._model import GenericModel
 from .._types import Scalar, State, States
 from ._scheme import AbstractScheme
@@ -46,12 +46,11 @@ class _Implicit(AbstractScheme):
     root_finder: AbstractRootFinder = FixedPointThenNewton()
 
     def __check_init__(self):
-        if not isinstance(self.root_finder, AbstractRootFinder):
-            raise MetriplexError(
-                f"root_finder must be a root finder such as FixedPointThenNewton() (the "
-                f"default), Newton() or FixedPoint() (metriplex.integrate); got "
-                f"{self.root_finder!r}."
-            )
+        expect_instance(
+            self.root_finder, AbstractRootFinder, what="root_finder",
+            expected="a root finder such as FixedPointThenNewton() (the default), Newton() or "
+            "FixedPoint() (metriplex.integrate)",
+        )
 
     def start(self, model: GenericModel, x0: State) -> Any:
         """The part of the average that depends on ``x0`` alone (default: nothing)."""
