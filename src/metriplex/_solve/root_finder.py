@@ -11,7 +11,7 @@ one final subclass of :class:`AbstractRootFinder` here plus one line in :data:`R
 from __future__ import annotations
 
 import abc
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 import equinox as eqx
 import jax
@@ -38,100 +38,7 @@ class AbstractRootFinder(eqx.Module):
         axis. Return ``(x1, converged, iterations)``, the last two of shape ``(B,)``."""
 
 
-class FixedPointThenNewton(AbstractRootFinder):
-    r"""Fixed-point iteration :math:`x_1 \leftarrow x_0 + \Delta t\,\bar f(x_0, x_1)` from the
-    rollout's predictor, at most ``fixed_point_steps`` iterations; **Newton** (at most
-    ``max_steps`` iterations) for the steps where it does not converge. In a batch, the Newton
-    fallback is one batched solve, run only at steps where some trajectory needs it. The
-    default of every implicit scheme (``--solver auto``).
-
-    A fixed-point iteration costs one evaluation of the vector field; a Newton iteration also
-    builds its :math:`n\times n` Jacobian (``n`` forward-mode products through the model) and
-    solves with it, about 4-6x more on the reference models. For non-stiff steps
-    (:math:`\Delta t\,\|\partial\bar f/\partial x_1\| < 1`) the fixed point converges in a few
-    iterations. The fixed-point iteration converges linearly, so its error is a multiple of its
-    last update (Newton's is far below its last update): it iterates to rounding level, an
-    update below 8 machine epsilons (a tenth of ``rtol``/``atol`` when they are given). Both
-    then give the same accuracy (``benchmarks/bench_solvers.py``, pendulum, 64 x 1000 steps:
-    float32 error at t = 10 against a tight reference 5.3e-7 (Newton) and 6.1e-7; float64
-    discrete-gradient energy drift 1.2e-14 for both) at 2.8-6x less CPU time.
-
-    ``rtol``, ``atol``: Newton's tolerances (default 1e-11 in float64, 1e-5 in float32); the
-    fixed point stops at a tenth of them.
-    """
-
-    rtol: float | None = None
-    atol: float | None = None
-    fixed_point_steps: int = 16
-    max_steps: int = 32
-
-    def solve_batch(self, update: Update, x0: States, guess: States,
-                    args: Any) -> tuple[States, jax.Array, jax.Array]:
-        first = _fixed_point(update, x0, guess, args, self.rtol, self.atol,
-                             self.fixed_point_steps)
-
-        def fallback(first):
-            y, ok, its = first
-            y2, ok2, its2 = _newton(update, x0, guess, args, self.rtol, self.atol,
-                                    self.max_steps)
-            return jnp.where(ok[:, None], y, y2), ok | ok2, its + jnp.where(ok, 0, its2)
-
-        # An unbatched predicate: Newton runs only at steps where some trajectory needs it.
-        return jax.lax.cond(jnp.any(~first[1]), fallback, lambda first: first, first)
-
-
-class Newton(AbstractRootFinder):
-    """Newton's method (Optimistix ``Newton``) at every step, at most ``max_steps``
-    iterations: for stiff models (e.g. fast heat conduction, where the fixed point diverges at
-    every step and :class:`FixedPointThenNewton` would only add its wasted iterations).
-    ``--solver newton``.
-
-    ``rtol``, ``atol``: default 1e-11 in float64, 1e-5 in float32.
-    """
-
-    rtol: float | None = None
-    atol: float | None = None
-    max_steps: int = 32
-
-    def solve_batch(self, update: Update, x0: States, guess: States,
-                    args: Any) -> tuple[States, jax.Array, jax.Array]:
-        return _newton(update, x0, guess, args, self.rtol, self.atol, self.max_steps)
-
-
-class FixedPoint(AbstractRootFinder):
-    """Fixed-point iteration only, at most ``max_steps`` iterations; a step where it does not
-    converge fails. ``--solver fixed-point``.
-
-    ``rtol``, ``atol``: it stops at a tenth of them; by default, at an update below 8 machine
-    epsilons (rounding level).
-    """
-
-    rtol: float | None = None
-    atol: float | None = None
-    max_steps: int = 32
-
-    def solve_batch(self, update: Update, x0: States, guess: States,
-                    args: Any) -> tuple[States, jax.Array, jax.Array]:
-        return _fixed_point(update, x0, guess, args, self.rtol, self.atol, self.max_steps)
-
-
-#: The root finders by the command line's ``--solver`` names, each with the one line that
-#: ``--solver``'s help says of it; :func:`metriplex.app.config.scheme_from_name` reads it.
-ROOT_FINDERS: dict[str, tuple[type[AbstractRootFinder], str]] = {
-    "auto": (FixedPointThenNewton,
-             "fixed-point iteration, Newton where it does not converge; the default"),
-    "newton": (Newton, "Newton's method from the start, for stiff models"),
-    "fixed-point": (FixedPoint, "fixed-point iteration only"),
-}
-
-
-def _solver_name(root_finder: AbstractRootFinder) -> str:
-    """The ``--solver`` name of ``root_finder`` in :data:`ROOT_FINDERS`; the class name of
-    one that is not registered."""
-    for name, (cls, _) in ROOT_FINDERS.items():
-        if type(root_finder) is cls:
-            return name
-    return type(root_finder).__name__
+# -- the two methods, each for a batch of steps; the root finders below run them ----------------
 
 
 class _FixedPointIteration(optx.FixedPointIteration):
@@ -196,3 +103,106 @@ def _outcome(sol):
     y = sol.value
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(y))
     return y, ok, sol.stats["num_steps"]
+
+
+# -- the root finders ---------------------------------------------------------------------------
+
+
+class FixedPointThenNewton(AbstractRootFinder):
+    r"""Fixed-point iteration :math:`x_1 \leftarrow x_0 + \Delta t\,\bar f(x_0, x_1)` from the
+    rollout's predictor, at most ``fixed_point_steps`` iterations; **Newton** (at most
+    ``max_steps`` iterations) for the steps where it does not converge. In a batch, the Newton
+    fallback is one batched solve, run only at steps where some trajectory needs it. The
+    default of every implicit scheme (``--solver auto``).
+
+    A fixed-point iteration costs one evaluation of the vector field; a Newton iteration also
+    builds its :math:`n\times n` Jacobian (``n`` forward-mode products through the model) and
+    solves with it, about 4-6x more on the reference models. For non-stiff steps
+    (:math:`\Delta t\,\|\partial\bar f/\partial x_1\| < 1`) the fixed point converges in a few
+    iterations. The fixed-point iteration converges linearly, so its error is a multiple of its
+    last update (Newton's is far below its last update): it iterates to rounding level, an
+    update below 8 machine epsilons (a tenth of ``rtol``/``atol`` when they are given). Both
+    then give the same accuracy (``benchmarks/bench_solvers.py``, pendulum, 64 x 1000 steps:
+    float32 error at t = 10 against a tight reference 5.3e-7 (Newton) and 6.1e-7; float64
+    discrete-gradient energy drift 1.2e-14 for both) at 2.8-6x less CPU time.
+
+    ``rtol``, ``atol``: Newton's tolerances (default 1e-11 in float64, 1e-5 in float32); the
+    fixed point stops at a tenth of them.
+    """
+
+    rtol: float | None = None
+    atol: float | None = None
+    fixed_point_steps: int = 16
+    max_steps: int = 32
+
+    def solve_batch(self, update: Update, x0: States, guess: States,
+                    args: Any) -> tuple[States, jax.Array, jax.Array]:
+        first = _fixed_point(update, x0, guess, args, self.rtol, self.atol,
+                             self.fixed_point_steps)
+
+        def fallback(first):
+            y, ok, its = first
+            y2, ok2, its2 = _newton(update, x0, guess, args, self.rtol, self.atol,
+                                    self.max_steps)
+            return jnp.where(ok[:, None], y, y2), ok | ok2, its + jnp.where(ok, 0, its2)
+
+        # An unbatched predicate: Newton runs only at steps where some trajectory needs it.
+        return jax.lax.cond(jnp.any(~first[1]), fallback, lambda first: first, first)
+
+
+class _AbstractOneMethod(AbstractRootFinder):
+    """A root finder that runs one method (``method``, :func:`_newton` or
+    :func:`_fixed_point`) at every step, at most ``max_steps`` iterations, with the tolerances
+    ``rtol`` and ``atol``: what :class:`Newton` and :class:`FixedPoint` share."""
+
+    rtol: float | None = None
+    atol: float | None = None
+    max_steps: int = 32
+    #: ``method(update, x0, guess, args, rtol, atol, max_steps)`` for a batch.
+    method: ClassVar[Callable[..., tuple[States, jax.Array, jax.Array]]]
+
+    def solve_batch(self, update: Update, x0: States, guess: States,
+                    args: Any) -> tuple[States, jax.Array, jax.Array]:
+        return self.method(update, x0, guess, args, self.rtol, self.atol, self.max_steps)
+
+
+class Newton(_AbstractOneMethod):
+    """Newton's method (Optimistix ``Newton``) at every step, at most ``max_steps``
+    iterations: for stiff models (e.g. fast heat conduction, where the fixed point diverges at
+    every step and :class:`FixedPointThenNewton` would only add its wasted iterations).
+    ``--solver newton``.
+
+    ``rtol``, ``atol``: default 1e-11 in float64, 1e-5 in float32.
+    """
+
+    method = staticmethod(_newton)
+
+
+class FixedPoint(_AbstractOneMethod):
+    """Fixed-point iteration only, at most ``max_steps`` iterations; a step where it does not
+    converge fails. ``--solver fixed-point``.
+
+    ``rtol``, ``atol``: it stops at a tenth of them; by default, at an update below 8 machine
+    epsilons (rounding level).
+    """
+
+    method = staticmethod(_fixed_point)
+
+
+#: The root finders by the command line's ``--solver`` names, each with the one line that
+#: ``--solver``'s help says of it; :func:`metriplex.app.config.scheme_from_name` reads it.
+ROOT_FINDERS: dict[str, tuple[type[AbstractRootFinder], str]] = {
+    "auto": (FixedPointThenNewton,
+             "fixed-point iteration, Newton where it does not converge; the default"),
+    "newton": (Newton, "Newton's method from the start, for stiff models"),
+    "fixed-point": (FixedPoint, "fixed-point iteration only"),
+}
+
+
+def _solver_name(root_finder: AbstractRootFinder) -> str:
+    """The ``--solver`` name of ``root_finder`` in :data:`ROOT_FINDERS`; the class name of
+    one that is not registered."""
+    for name, (cls, _) in ROOT_FINDERS.items():
+        if type(root_finder) is cls:
+            return name
+    return type(root_finder).__name__
