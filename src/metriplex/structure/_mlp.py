@@ -46,6 +46,12 @@ ACTIVATIONS = {
 }
 
 
+#: The hidden stack of every learned block unless its constructor is told otherwise:
+#: ``DEPTH`` layers of ``WIDTH`` units with the smooth ``ACTIVATION`` (docs/zoo.md measured
+#: widths 32, 64 and 128 and kept 64). A spec saved without an activation means ``ACTIVATION``.
+WIDTH, DEPTH, ACTIVATION = 64, 2, "softplus"
+
+
 def activation_fn(name: str) -> Callable[[jax.Array], jax.Array]:
     if name not in ACTIVATIONS:
         raise MetriplexError(
@@ -188,10 +194,19 @@ class FoldedHead(eqx.Module):
 
 
 def folded_network(in_size: int, n: int, triangle: str, *, width: int, depth: int,
-                   activation: str, row_scale: Sequence[float] | None, init_scale: float,
+                   activation: str, scaling: Any, init_scale: float,
                    key: jax.Array) -> tuple[Hidden, FoldedHead]:
     """The hidden stack (``in_size`` inputs) and the folded head (see :class:`FoldedHead`) of a
-    learned ``n x n`` matrix of ``triangle``."""
+    learned ``n x n`` matrix of ``triangle``, whose rows carry the congruence of ``scaling``
+    (its ``row_scale`` for that triangle), a :class:`~metriplex.structure.scaling.Scaling`
+    (whose module imports this one) or ``None``."""
     hkey, okey = jr.split(key)
+    row_scale = None if scaling is None else scaling.row_scale(triangle)
     return (Hidden(in_size, width, depth, activation, key=hkey),
             FoldedHead(width, n, triangle, row_scale, init_scale, key=okey))
+
+
+def check_variables(n: int, at_least: int, what: str) -> None:
+    """Raise unless a state of ``n`` variables is large enough for the block ``what``."""
+    if n < at_least:
+        raise MetriplexError(f"{what} needs n >= {at_least} variables; got {n}.")

@@ -51,11 +51,12 @@ def not_serialisable(obj: object) -> NotSerialisable:
 
 def network_kwargs(spec: dict[str, Any]) -> dict[str, Any]:
     """Constructor arguments shared by the network blocks, from their saved spec."""
+    from ._mlp import ACTIVATION
     from .scaling import Scaling
 
     return {
         "width": spec["width"],
         "depth": spec["depth"],
-        "activation": spec.get("activation", "softplus"),
+        "activation": spec.get("activation", ACTIVATION),
         "scaling": Scaling.from_json(spec.get("scaling")),
     }

@@ -18,7 +18,7 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, Scalar, State
 from ._abstract import AbstractPoisson
-from ._mlp import Hidden, network_spec
+from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, network_spec
 from ._registry import network_kwargs, register
 from .scaling import Scaling, scaling_spec, standardise_state
 
@@ -71,12 +71,8 @@ class _AbstractCasimir3(AbstractPoisson):
     scaling: Scaling | None = eqx.field(static=True)
 
     def __init__(
-        self,
-        n: int = 3,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
+        self, n: int = 3, *,
+        width: int = WIDTH, depth: int = DEPTH, activation: str = ACTIVATION,
         scaling: Scaling | None = None,
         key: jax.Array,
     ) -> None:

@@ -13,9 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import MetriplexError
 from .._types import Matrix, State
-from ._mlp import FoldedHead, Hidden, data_statistics, folded_network, network_spec, standardise
+from ._mlp import ACTIVATION, DEPTH, WIDTH
+from ._mlp import FoldedHead, Hidden, check_variables, data_statistics
+from ._mlp import folded_network, network_spec, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
@@ -49,20 +50,15 @@ class CholeskyFriction(AbstractFriction):
     input_stats: tuple[tuple[float, ...], tuple[float, ...]] | None = eqx.field(static=True)
 
     def __init__(
-        self,
-        n: int,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
+        self, n: int, *,
+        width: int = WIDTH, depth: int = DEPTH, activation: str = ACTIVATION,
         scaling: Scaling | None = None,
         features: FeatureMap | None = None,
         data: ArrayLike | None = None,
         input_stats: Sequence[Sequence[float]] | None = None,
         key: jax.Array,
     ) -> None:
-        if n < 1:
-            raise MetriplexError(f"a friction matrix needs n >= 1 variables; got {n}.")
+        check_variables(n, 1, "a friction matrix")
         self.n = n
         self.scaling = scaling
         self.features = features
@@ -79,8 +75,7 @@ class CholeskyFriction(AbstractFriction):
         # Small initial B: training starts close to reversible dynamics.
         self.hidden, self.head = folded_network(
             in_size, n, "lower", width=width, depth=depth, activation=activation,
-            row_scale=None if scaling is None else scaling.row_scale("lower"), init_scale=0.1,
-            key=key,
+            scaling=scaling, init_scale=0.1, key=key,
         )
 
     def _inputs(self, x: State):

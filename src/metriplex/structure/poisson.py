@@ -15,7 +15,8 @@ import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Matrix, State
-from ._mlp import FoldedHead, Hidden, folded_network, network_spec
+from ._mlp import ACTIVATION, DEPTH, WIDTH
+from ._mlp import FoldedHead, Hidden, check_variables, folded_network, network_spec
 from ._abstract import AbstractPoisson
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
@@ -39,23 +40,17 @@ class SkewMLPPoisson(AbstractPoisson):
     scaling: Scaling | None = eqx.field(static=True)
 
     def __init__(
-        self,
-        n: int,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
+        self, n: int, *,
+        width: int = WIDTH, depth: int = DEPTH, activation: str = ACTIVATION,
         scaling: Scaling | None = None,
         key: jax.Array,
     ) -> None:
-        if n < 2:
-            raise MetriplexError(f"a learned Poisson bivector needs n >= 2 variables; got {n}.")
+        check_variables(n, 2, "a learned Poisson bivector")
         self.n = n
         self.scaling = scaling
         self.hidden, self.head = folded_network(
             n, n, "skew", width=width, depth=depth, activation=activation,
-            row_scale=None if scaling is None else scaling.row_scale("skew"), init_scale=1.0,
-            key=key,
+            scaling=scaling, init_scale=1.0, key=key,
         )
 
     uses_gradient: ClassVar[bool] = False

@@ -15,7 +15,7 @@ import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Scalar, State
-from ._mlp import Hidden, data_statistics, network_spec, standardise
+from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, data_statistics, network_spec, standardise
 from ._abstract import AbstractPotential
 from ._registry import register
 
@@ -103,12 +103,8 @@ class MLPPotential(AbstractPotential):
     quadratic: jax.Array | None
 
     def __init__(
-        self,
-        n: int,
-        *,
-        width: int = 64,
-        depth: int = 2,
-        activation: str = "softplus",
+        self, n: int, *,
+        width: int = WIDTH, depth: int = DEPTH, activation: str = ACTIVATION,
         features: FeatureMap | None = None,
         data: ArrayLike | None = None,
         shift: Sequence[float] | None = None,
@@ -172,7 +168,7 @@ class MLPPotential(AbstractPotential):
             n,
             width=spec["width"],
             depth=spec["depth"],
-            activation=spec.get("activation", "softplus"),
+            activation=spec.get("activation", ACTIVATION),
             features=None if feats is None else FeatureMap(**feats),
             shift=spec.get("shift"),
             scale=spec.get("scale"),
