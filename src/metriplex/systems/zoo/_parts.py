@@ -49,6 +49,12 @@ def heating_friction(coefficient: float, theta: Scalar, v: jax.Array) -> Matrix:
     return (coefficient / theta) * (W @ W.T)
 
 
+def bath_heating(c: Any, coefficient: float, s: Scalar, v: jax.Array) -> Matrix:
+    r""":func:`heating_friction` of the bath of a config with ``heat_capacity`` and ``theta0``
+    at entropy ``s``: friction of ``coefficient`` on the velocities ``v`` heats it."""
+    return heating_friction(coefficient, bath_temperature(s, c.heat_capacity, c.theta0), v)
+
+
 def oscillator_energy(c: Any, q: Scalar, p: Scalar) -> Scalar:
     r""":math:`p^2/2m + kq^2/2 + aq^4/4` of a config with ``mass``, ``stiffness`` and
     ``quartic``."""

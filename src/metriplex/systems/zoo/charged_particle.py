@@ -42,7 +42,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import SumOf
 from .._base import System, _sample_box, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import bath_energy, bath_temperature, heating_friction
+from ._parts import bath_energy, bath_heating
 
 
 @dataclasses.dataclass(frozen=True)
@@ -128,8 +128,7 @@ def _poisson(c: ChargedParticleConfig, x: State) -> Matrix:
 
 
 def _friction(c: ChargedParticleConfig, x: State) -> Matrix:
-    theta = bath_temperature(x[6], c.heat_capacity, c.theta0)
-    return heating_friction(c.drag, theta, x[3:6] / c.mass)
+    return bath_heating(c, c.drag, x[6], x[3:6] / c.mass)
 
 
 @dataclasses.dataclass(frozen=True)

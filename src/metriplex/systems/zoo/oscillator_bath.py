@@ -24,14 +24,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import BoxSampling, System, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import (
-    bath_energy,
-    bath_temperature,
-    check_signs,
-    heating_friction,
-    oscillator_energy,
-    oscillator_frequency,
-)
+from ._parts import bath_energy, bath_heating, check_signs, oscillator_energy, oscillator_frequency
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,8 +58,7 @@ def _energy(c: OscillatorBathConfig, x: State) -> Scalar:
 
 
 def _friction(c: OscillatorBathConfig, x: State) -> Matrix:
-    theta = bath_temperature(x[2], c.heat_capacity, c.theta0)
-    return heating_friction(c.damping, theta, x[1:2] / c.mass)
+    return bath_heating(c, c.damping, x[2], x[1:2] / c.mass)
 
 
 @dataclasses.dataclass(frozen=True)

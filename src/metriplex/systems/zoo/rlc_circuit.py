@@ -28,13 +28,7 @@ from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import BoxSampling, System, analytic_model
 from ._case import ZooCase, case_settings
-from ._parts import (
-    bath_energy,
-    bath_temperature,
-    check_signs,
-    hardening_frequency,
-    heating_friction,
-)
+from ._parts import bath_energy, bath_heating, check_signs, hardening_frequency
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,8 +66,7 @@ def _energy(c: RLCCircuitConfig, x: State) -> Scalar:
 
 
 def _friction(c: RLCCircuitConfig, x: State) -> Matrix:
-    theta = bath_temperature(x[2], c.heat_capacity, c.theta0)
-    return heating_friction(c.resistance, theta, x[1:2] / c.inductance)
+    return bath_heating(c, c.resistance, x[2], x[1:2] / c.inductance)
 
 
 @dataclasses.dataclass(frozen=True)
