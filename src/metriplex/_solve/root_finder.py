@@ -151,19 +151,19 @@ class FixedPointThenNewton(AbstractRootFinder):
 
 
 class _AbstractOneMethod(AbstractRootFinder):
-    """A root finder that runs one method (``method``, :func:`_newton` or
+    """A root finder that runs one method (``_method``, :func:`_newton` or
     :func:`_fixed_point`) at every step, at most ``max_steps`` iterations, with the tolerances
     ``rtol`` and ``atol``: what :class:`Newton` and :class:`FixedPoint` share."""
 
     rtol: float | None = None
     atol: float | None = None
     max_steps: int = 32
-    #: ``method(update, x0, guess, args, rtol, atol, max_steps)`` for a batch.
-    method: ClassVar[Callable[..., tuple[States, jax.Array, jax.Array]]]
+    #: ``_method(update, x0, guess, args, rtol, atol, max_steps)`` for a batch.
+    _method: ClassVar[Callable[..., tuple[States, jax.Array, jax.Array]]]
 
     def solve_batch(self, update: Update, x0: States, guess: States,
                     args: Any) -> tuple[States, jax.Array, jax.Array]:
-        return self.method(update, x0, guess, args, self.rtol, self.atol, self.max_steps)
+        return self._method(update, x0, guess, args, self.rtol, self.atol, self.max_steps)
 
 
 class Newton(_AbstractOneMethod):
@@ -175,7 +175,7 @@ class Newton(_AbstractOneMethod):
     ``rtol``, ``atol``: default 1e-11 in float64, 1e-5 in float32.
     """
 
-    method = staticmethod(_newton)
+    _method = staticmethod(_newton)
 
 
 class FixedPoint(_AbstractOneMethod):
@@ -186,7 +186,7 @@ class FixedPoint(_AbstractOneMethod):
     epsilons (rounding level).
     """
 
-    method = staticmethod(_fixed_point)
+    _method = staticmethod(_fixed_point)
 
 
 #: The root finders by the command line's ``--solver`` names, each with the one line that
