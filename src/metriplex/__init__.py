@@ -1,6 +1,6 @@
-"""metriplex: learn thermodynamically consistent (GENERIC) dynamics from trajectories.
+r"""metriplex: learn thermodynamically consistent (GENERIC) dynamics from trajectories.
 
-.. math:: \\dot x = L(x)\\nabla E(x) + M(x)\\nabla S(x),\\quad L\\nabla S = 0,\\ M\\nabla E = 0.
+.. math:: \dot x = L(x)\nabla E(x) + M(x)\nabla S(x),\quad L\nabla S = 0,\ M\nabla E = 0.
 """
 
 from ._version import __version__ as __version__

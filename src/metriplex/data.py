@@ -106,7 +106,7 @@ def check_time_step(dt: Any, option: str = "dt") -> float:
 
 
 class Pairs(NamedTuple):
-    """Training pairs :math:`(x_n, x_{n+1}, \\Delta t_n)` as arrays of equal length."""
+    r"""Training pairs :math:`(x_n, x_{n+1}, \Delta t_n)` as arrays of equal length."""
 
     x0: np.ndarray
     x1: np.ndarray

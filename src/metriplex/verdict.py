@@ -171,7 +171,8 @@ def verdict(
     seed: int = 0,
     progress: bool = False,
 ) -> dict[str, Any]:
-    """Is ``data`` consistent with the GENERIC ``model``? See the module docstring.
+    """Whether ``data`` are consistent with the GENERIC ``model``: the verdict of the checks in
+    the module docstring.
 
     ``report``: :func:`metriplex.evaluate` of ``model`` on ``data`` (computed with ``scheme``
     when not given): its rollout failures and the entropy production along its rollouts are

@@ -24,7 +24,8 @@ class AbstractScheme(eqx.Module):
     @abc.abstractmethod
     def step(self, model: GenericModel, x: State, dt: Scalar | float,
              guess: State) -> tuple[State, jax.Array, jax.Array]:
-        """Return ``(x_next, converged, iterations)``."""
+        """One step of size ``dt`` from ``x``, the implicit solve started at ``guess``:
+        ``(x_next, converged, iterations)``."""
 
     def step_batch(self, model: GenericModel, x: States, dt: jax.Array,
                    guess: States) -> tuple[States, jax.Array, jax.Array]:

@@ -25,7 +25,7 @@ Update = Callable[[State, State, Any], State]
 
 
 class AbstractRootFinder(eqx.Module):
-    r"""Solves the implicit step :math:`x_1 = x_0 + \text{update}(x_0, x_1)` of a batch.
+    r"""A solver of the implicit step :math:`x_1 = x_0 + \text{update}(x_0, x_1)` of a batch.
 
     Concrete root finders are final; each carries its own tolerances and iteration limits.
     """

@@ -1,12 +1,14 @@
 """Trajectories in HDF5 (``.h5``, ``.hdf5``), read and written: the observations of the long
 table of docs/design.md, 'Trajectory data' (rows of ``trajectory``, ``t``, ``x``), laid out the
-way users of HDF5 already store them::
+way users of HDF5 already store them:
 
-    /                      attrs: names (n strings), format, format_version
-    /trajectory_0          attrs: trajectory (int id, optional)
-        t                  (T_0,)    strictly increasing times
-        x                  (T_0, n)  states
-    /trajectory_1 ...      any group names; trajectories may have different lengths
+```text
+/                      attrs: names (n strings), format, format_version
+/trajectory_0          attrs: trajectory (int id, optional)
+    t                  (T_0,)    strictly increasing times
+    x                  (T_0, n)  states
+/trajectory_1 ...      any group names; trajectories may have different lengths
+```
 
 Groups are read in natural order (``run2`` before ``run10``). The integer attribute
 ``trajectory`` on every group gives the ids; without it on all groups, ids are ``0, 1, ...`` in

@@ -83,7 +83,7 @@ class AbstractProjected(eqx.Module):
         return self.base.scaling
 
     def _projector(self, gradient: State, dtype):
-        """:math:`\\hat g, \\hat u` of :func:`projector_vectors` in the network's scaling."""
+        r""":math:`\hat g, \hat u` of :func:`projector_vectors` in the network's scaling."""
         s = self.base.scaling
         return projector_vectors(
             gradient, None if s is None else s.scale, default_eps(self.eps, dtype)

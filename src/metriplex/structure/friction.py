@@ -120,7 +120,7 @@ class CholeskyFriction(AbstractFriction):
 
 @register("friction", "zero")
 class ZeroFriction(AbstractZeroMatrix, AbstractFriction):
-    """No dissipation: ``M = 0``."""
+    """No dissipation: :math:`M = 0`."""
 
     uses_gradient: ClassVar[bool] = False
 

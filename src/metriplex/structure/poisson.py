@@ -113,7 +113,7 @@ class CanonicalPoisson(AbstractPoisson):
 
 @register("poisson", "zero")
 class ZeroPoisson(AbstractZeroMatrix, AbstractPoisson):
-    """No reversible dynamics: ``L = 0``."""
+    """No reversible dynamics: :math:`L = 0`."""
 
     uses_gradient: ClassVar[bool] = False
 

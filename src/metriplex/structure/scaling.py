@@ -73,8 +73,8 @@ class Scaling:
         return self.factor * np.outer(d, d)
 
     def row_scale(self, triangle: str) -> tuple[float, ...]:
-        """Row factors that turn a flat ``n*n`` matrix ``A`` into ``f D A D^T`` (skew) or
-        ``sqrt(f) D B`` (lower; then ``M = f D B B^T D^T``)."""
+        r"""Row factors that turn a flat ``n*n`` matrix :math:`A` into :math:`fDAD^\top`
+        (skew) or :math:`\sqrt f DB` (lower; then :math:`M = fDBB^\top D^\top`)."""
         d = np.asarray(self.scale)
         if triangle == "skew":
             return tuple(float(v) for v in self.congruence().ravel())

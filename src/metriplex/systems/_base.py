@@ -164,11 +164,11 @@ class BoxSampling:
 
 
 class BallSampling:
-    """Initial states uniform by volume in the ball :math:`|x - c| \\le r` of the config's
+    r"""Initial states uniform by volume in the ball :math:`|x - c| \le r` of the config's
     ``center`` and ``radius`` (a mixin of :class:`System`)."""
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num n"]:
-        """Uniform by volume in the ball :math:`|x - c| \\le r` (``config.radius``, ``center``)."""
+        r"""Uniform by volume in the ball :math:`|x - c| \le r` (``config.radius``, ``center``)."""
         self._check_num(num)
         center = np.asarray(self.config.center, dtype=np.float64)
         rng = np.random.default_rng(seed)

@@ -100,8 +100,8 @@ def generate(
     gas-containers                 400 x 0.02             10         7.6e-10  1e-7
     =============================  =====================  =========  =======  =========
 
-    (*) :math:`\theta \approx 300`: DOP853's own error in θ (it moves by as much between
-    rtol 1e-12 and 1e-13); against DOP853 run in :math:`(q, p, s)` and mapped, 5e-8.
+    (*) :math:`\theta \approx 300`: DOP853's own error in :math:`\theta` (it moves by as much
+    between rtol 1e-12 and 1e-13); against DOP853 run in :math:`(q, p, s)` and mapped, 5e-8.
     The spnn pendulum is sensitive (a 1e-8 change of :math:`x_0` grows to 4e-4 by
     :math:`t = 60`), which sets the error over its full horizon. For comparison,
     Crank–Nicolson with the same number of sub-steps errs by 1e-4 on gas-containers and

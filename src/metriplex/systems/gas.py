@@ -80,9 +80,9 @@ def _friction(c: GasConfig, x: State) -> Matrix:
 
 @dataclasses.dataclass(frozen=True)
 class GasContainers(BoxSampling, System):
-    """Two gas containers exchanging heat through a moving piston (a shared GENERIC benchmark).
+    r"""Two gas containers exchanging heat through a moving piston (a shared GENERIC benchmark).
 
-    Published settings: 100 trajectories on :math:`t\\in[0, 8]` with :math:`\\Delta t = 0.02`
+    Published settings: 100 trajectories on :math:`t\in[0, 8]` with :math:`\Delta t = 0.02`
     (400 steps); the first 80 for training.
     """
 

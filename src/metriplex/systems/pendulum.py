@@ -135,7 +135,7 @@ def _arr(values, x):
 
 
 def _strains(c: PendulumConfig, q: Float[Array, " 4"]) -> Float[Array, " 2"]:
-    """Log-strains :math:`a_i = \\log(\\lambda_i/\\lambda_i^0)`, via squared lengths."""
+    r"""Log-strains :math:`a_i = \log(\lambda_i/\lambda_i^0)`, via squared lengths."""
     d = q[2:4] - q[0:2]
     sq = jnp.stack([jnp.sum(q[0:2] ** 2), jnp.sum(d**2)])
     lam0 = _arr(c.rest_lengths, q)
@@ -164,8 +164,8 @@ def _strain_gradient(q: Float[Array, " 4"]) -> Float[Array, "2 4"]:
 
 
 def _energy(c: PendulumConfig, x: State, a: Float[Array, " 2"], heat) -> Scalar:
-    """:math:`E` of a state with log-strains ``a`` whose springs hold the heat energies
-    ``heat`` (relative to :math:`\\theta_{\\rm ref}`), in either view."""
+    r""":math:`E` of a state with log-strains ``a`` whose springs hold the heat energies
+    ``heat`` (relative to :math:`\theta_{\rm ref}`), in either view."""
     C, beta = _arr(c.stiffness, x), _arr(c.beta, x)
     return _kinetic(c, x[4:8]) + jnp.sum(0.5 * C * a**2 + beta * c.theta_ref * a + heat)
 

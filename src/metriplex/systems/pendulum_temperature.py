@@ -101,7 +101,8 @@ class PendulumTemperature(_Pendulum):
         return PendulumEnergetic(self.config)
 
     def sample_initial(self, num: int, *, seed: int) -> Float[np.ndarray, "num 10"]:
-        """Drawn in :math:`(q, p, s)` like :class:`PendulumEnergetic`, then mapped to θ."""
+        r"""Drawn in :math:`(q, p, s)` like :class:`PendulumEnergetic`, then mapped to
+        :math:`(q, p, \theta)`."""
         x = self.energetic.sample_initial(num, seed=seed)
         c = self.config
         q1, d = x[:, 0:2], x[:, 2:4] - x[:, 0:2]

@@ -26,12 +26,12 @@ from ._base import BallSampling, Settings, System, analytic_model
 
 @dataclasses.dataclass(frozen=True)
 class RigidBodyConfig:
-    """Parameters of the free rigid body.
+    r"""Parameters of the free rigid body.
 
     - ``inertia``: principal moments :math:`(I_1, I_2, I_3)`, all positive. Default
       ``(10, 20, 40)``, as in the seed authors' rigid-body code.
     - ``radius``: initial states are drawn uniformly (by volume) from the ball
-      :math:`|m - c| \\le` ``radius`` (default 1).
+      :math:`|m - c| \le` ``radius`` (default 1).
     - ``center``: the ball's centre :math:`c` (default the origin).
     """
 

@@ -2,9 +2,11 @@ r"""The reference experiments of "Learning the GENERIC evolution", end to end.
 
 Each experiment generates ground-truth training data and **unseen** test trajectories (other
 initial conditions), trains with its preset structure, evaluates on the test trajectories and
-writes the run folder with ``metrics.json`` and figures (each with its raw data)::
+writes the run folder with ``metrics.json`` and figures (each with its raw data):
 
-    metriplex reproduce pendulum-energetic --out runs/pendulum-energetic
+```bash
+metriplex reproduce pendulum-energetic --out runs/pendulum-energetic
+```
 
 ``--quick`` runs a reduced version (small data, short training) in well under two minutes.
 """

@@ -74,7 +74,7 @@ class HeatExchangeConfig:
 
     @property
     def relaxation_time(self) -> float:
-        """:math:`\\tau = 1/(\\kappa(1/C_1 + 1/C_2))` in hours."""
+        r""":math:`\tau = 1/(\kappa(1/C_1 + 1/C_2))` in hours."""
         return 1.0 / (self.kappa * (1.0 / self.heat_capacity[0] + 1.0 / self.heat_capacity[1]))
 
 
