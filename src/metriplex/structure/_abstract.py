@@ -27,6 +27,8 @@ class _AbstractBlock(eqx.Module):
     code cannot be written)."""
 
     def spec(self) -> dict[str, Any]:
+        """A JSON-able description of the block (its registered ``kind`` and options) that
+        ``from_spec`` turns back into the same architecture; raises for a block that wraps code."""
         raise not_serialisable(self)
 
 
@@ -34,7 +36,8 @@ class AbstractPotential(_AbstractBlock):
     """A scalar function of the state."""
 
     @abc.abstractmethod
-    def __call__(self, x: State) -> Scalar: ...
+    def __call__(self, x: State) -> Scalar:
+        """The potential's value at the state ``x``: a scalar."""
 
 
 class _AbstractMatrix(_AbstractBlock):
@@ -49,11 +52,16 @@ class AbstractPoisson(_AbstractMatrix):
     """An antisymmetric matrix field ``L(x)``."""
 
     @abc.abstractmethod
-    def __call__(self, x: State, grad_entropy: State) -> Matrix: ...
+    def __call__(self, x: State, grad_entropy: State) -> Matrix:
+        r"""The antisymmetric :math:`L(x)`, shape ``(n, n)``, given :math:`\nabla S(x)` (which only
+        an exactly degenerate block reads; see ``uses_gradient``)."""
 
 
 class AbstractFriction(_AbstractMatrix):
     """A symmetric positive semi-definite matrix field ``M(x)``."""
 
     @abc.abstractmethod
-    def __call__(self, x: State, grad_energy: State) -> Matrix: ...
+    def __call__(self, x: State, grad_energy: State) -> Matrix:
+        r"""The symmetric positive semi-definite :math:`M(x)`, shape ``(n, n)``, given
+        :math:`\nabla E(x)` (which only an exactly degenerate block reads; see
+        ``uses_gradient``)."""

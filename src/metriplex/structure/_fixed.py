@@ -29,6 +29,7 @@ class AbstractZeroMatrix(eqx.Module):
     n: int = eqx.field(static=True)
 
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
+        """The ``(n, n)`` zero matrix, whatever ``x`` and ``gradient``."""
         return jnp.zeros((self.n, self.n), x.dtype)
 
     def spec(self) -> dict[str, Any]:
@@ -36,6 +37,7 @@ class AbstractZeroMatrix(eqx.Module):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
+        """The zero matrix of size ``n`` (``spec`` and ``key`` are not needed)."""
         return cls(n)
 
 
@@ -45,6 +47,7 @@ class AbstractFunctionMatrix(eqx.Module):
     fn: Callable = eqx.field(static=True)
 
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
+        """``fn(x)``; the gradient is not used."""
         return self.fn(x)
 
 
@@ -55,6 +58,7 @@ class AbstractConstantMatrix(eqx.Module):
     n: int = eqx.field(static=True)
 
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
+        """The given matrix in ``x``'s dtype; the state and the gradient are not used."""
         return jnp.asarray(self.matrix, x.dtype)
 
     def spec(self) -> dict[str, Any]:
@@ -62,6 +66,7 @@ class AbstractConstantMatrix(eqx.Module):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
+        """The constant matrix saved in ``spec`` (``n`` and ``key`` are not needed)."""
         return cls(spec["matrix"])
 
 

@@ -86,6 +86,7 @@ class CholeskyFriction(AbstractFriction):
         return standardise_state(x, self.scaling)
 
     def factor(self, x: State) -> Matrix:
+        r"""The lower-triangular factor :math:`B(x)` of :math:`M = BB^\top`, shape ``(n, n)``."""
         return self.head(self.hidden(self._inputs(x)))
 
     uses_gradient: ClassVar[bool] = False
@@ -115,6 +116,8 @@ class CholeskyFriction(AbstractFriction):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "CholeskyFriction":
+        """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
+        ``key`` draws weights that the model file then overwrites."""
         return cls(n, **cls.spec_options(spec), key=key)
 
 
@@ -164,6 +167,8 @@ class ProjectedCholeskyFriction(AbstractProjected, AbstractFriction):
     network: ClassVar[type] = CholeskyFriction
 
     def factor(self, x: State, grad_energy: State) -> Matrix:
+        r"""The factor :math:`F = \tilde P B` of :math:`M = FF^\top`: the network's :math:`B(x)`
+        projected against :math:`\nabla E` (``grad_energy``), shape ``(n, n)``."""
         B = self.base.factor(x)
         g_hat, u_hat = self._projector(grad_energy, x.dtype)
         return B - jnp.outer(u_hat, g_hat @ B)

@@ -66,4 +66,6 @@ class LiePoisson(AbstractPoisson):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "LiePoisson":
+        """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
+        ``key`` draws weights that the model file then overwrites."""
         return cls(n, scaling=Scaling.from_json(spec.get("scaling")), key=key)

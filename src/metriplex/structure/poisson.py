@@ -68,6 +68,8 @@ class SkewMLPPoisson(AbstractPoisson):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "SkewMLPPoisson":
+        """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
+        ``key`` draws weights that the model file then overwrites."""
         return cls(n, **cls.spec_options(spec), key=key)
 
 
@@ -92,6 +94,7 @@ class CanonicalPoisson(AbstractPoisson):
         self.pairs = pairs
 
     def matrix(self) -> np.ndarray:
+        """The canonical :math:`L` as a NumPy ``(n, n)`` array."""
         K = self.pairs
         J = np.zeros((self.n, self.n))
         J[:K, K : 2 * K] = np.eye(K)
@@ -108,6 +111,8 @@ class CanonicalPoisson(AbstractPoisson):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "CanonicalPoisson":
+        """The canonical bivector of ``n`` variables with the ``pairs`` saved in ``spec`` (``key``
+        is not needed)."""
         return cls(n, spec["pairs"])
 
 

@@ -50,9 +50,12 @@ class FeatureMap(eqx.Module):
 
     @property
     def size(self) -> int:
+        """The number of features: one per squared distance and one per passed component."""
         return len(self.squared_norms) + len(self.passthrough)
 
     def check(self, n: int) -> None:
+        """Raise :class:`~metriplex.MetriplexError` unless every index is a component of a state of
+        ``n`` variables."""
         used = [i for a, b in self.squared_norms for i in (*a, *b)] + list(self.passthrough)
         bad = [i for i in used if not 0 <= i < n]
         if bad:
@@ -62,6 +65,8 @@ class FeatureMap(eqx.Module):
             )
 
     def __call__(self, x: State) -> jax.Array:
+        """The features of the state ``x``: the squared distances, then the passed components; shape
+        ``(size,)``."""
         parts = []
         for a, b in self.squared_norms:
             d = x[jnp.array(a)] - (x[jnp.array(b)] if b else 0.0)
@@ -71,6 +76,7 @@ class FeatureMap(eqx.Module):
         return jnp.concatenate(parts)
 
     def to_json(self) -> dict[str, Any]:
+        """The constructor's arguments as JSON lists: ``FeatureMap(**to_json())`` rebuilds it."""
         return {
             "squared_norms": [[list(a), list(b)] for a, b in self.squared_norms],
             "passthrough": list(self.passthrough),
@@ -163,6 +169,8 @@ class MLPPotential(AbstractPotential):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "MLPPotential":
+        """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
+        ``key`` draws weights that the model file then overwrites."""
         feats = spec.get("features")
         return cls(
             n,
@@ -197,6 +205,7 @@ class SumOf(AbstractPotential):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "SumOf":
+        """The ``SumOf`` of the indices saved in ``spec`` (``n`` and ``key`` are not needed)."""
         return cls(spec["indices"])
 
 
@@ -212,6 +221,7 @@ class ZeroPotential(AbstractPotential):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "ZeroPotential":
+        """The zero potential (``spec``, ``n`` and ``key`` are not needed)."""
         return cls()
 
 

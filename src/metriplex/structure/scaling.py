@@ -59,6 +59,7 @@ class Scaling:
 
     @classmethod
     def identity(cls, n: int) -> "Scaling":
+        """No scaling for ``n`` variables: shift 0, scale 1, factor 1."""
         return cls((0.0,) * n, (1.0,) * n)
 
     @classmethod
@@ -81,10 +82,12 @@ class Scaling:
         return tuple(float(v) for v in np.sqrt(self.factor) * np.repeat(d, len(d)))
 
     def to_json(self) -> dict:
+        """The fields as JSON: :meth:`from_json` rebuilds the scaling."""
         return {"shift": list(self.shift), "scale": list(self.scale), "factor": self.factor}
 
     @classmethod
     def from_json(cls, obj: dict[str, Any] | None) -> "Scaling | None":
+        """The scaling that :meth:`to_json` wrote, or ``None`` for ``None`` (no scaling)."""
         if obj is None:
             return None
         return cls(tuple(obj["shift"]), tuple(obj["scale"]), float(obj.get("factor", 1.0)))
