@@ -33,14 +33,17 @@ class Terms(NamedTuple):
 
     @property
     def reversible(self) -> State:
+        r"""The reversible part of the field, :math:`L\nabla E`."""
         return self.poisson @ self.grad_energy
 
     @property
     def irreversible(self) -> State:
+        r"""The irreversible part of the field, :math:`M\nabla S`."""
         return self.friction @ self.grad_entropy
 
     @property
     def vector_field(self) -> State:
+        r"""The GENERIC field :math:`L\nabla E + M\nabla S`."""
         return self.reversible + self.irreversible
 
 
@@ -69,17 +72,22 @@ class GenericModel(eqx.Module):
     friction: AbstractFriction
 
     def terms(self, x: State) -> Terms:
+        """Everything GENERIC evaluates at the state ``x``, computed once: the potentials, their
+        gradients by autodiff and the two matrices."""
         E, gE = jax.value_and_grad(self.energy)(x)
         S, gS = jax.value_and_grad(self.entropy)(x)
         return Terms(E, S, gE, gS, self.poisson(x, gS), self.friction(x, gE))
 
     def vector_field(self, x: State) -> State:
+        r"""The time derivative :math:`\dot x = L\nabla E + M\nabla S` at the state ``x``."""
         return self.terms(x).vector_field
 
     def __call__(self, x: State) -> State:
+        """The vector field at ``x`` (:meth:`vector_field`)."""
         return self.vector_field(x)
 
     def poisson_matrix(self, x: State) -> Matrix:
+        """The Poisson bivector :math:`L(x)`, its block called with the entropy's gradient."""
         return self.poisson(x, jax.grad(self.entropy)(x))
 
     def jacobi_tensor(self, x: State) -> Float[Array, "n n n"]:
@@ -105,6 +113,9 @@ class GenericModel(eqx.Module):
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "GenericModel":
+        """The model that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables, each
+        block rebuilt through the block registry; ``key`` draws weights that the model file then
+        overwrites."""
         k1, k2, k3, k4 = jax.random.split(key, 4)
         return cls(
             energy=_registry.from_spec("potential", spec["energy"], n, key=k1),

@@ -60,16 +60,20 @@ class BlackBoxModel(eqx.Module):
         self.entropy = ZeroPotential()
 
     def vector_field(self, x: State) -> State:
+        """The network's field at the state ``x``, in the data's units."""
         z = standardise(x, self.shift, self.scale)
         return self.out(self.hidden(z)) * jnp.asarray(self.rate, x.dtype)
 
     def terms(self, x: State) -> Terms:
         # Expressed as Terms with L = I and grad E = f, so every pair loss applies unchanged.
+        r"""The field as :class:`~metriplex.Terms` with :math:`L = I`, :math:`\nabla E = f` and the
+        rest zero, so that every pair loss applies unchanged."""
         zero = jnp.zeros((), x.dtype)
         eye = jnp.eye(self.n, dtype=x.dtype)
         return Terms(zero, zero, self.vector_field(x), jnp.zeros_like(x), eye, 0.0 * eye)
 
     def poisson_matrix(self, x: State) -> Matrix:
+        """The zero matrix: the black box has no bracket to check."""
         return jnp.zeros((self.n, self.n), x.dtype)
 
 

@@ -100,6 +100,7 @@ class Units:
         return Scaling(self.shift, self.scale, 1.0 / (self.time * self.entropy))
 
     def to_json(self) -> dict:
+        """The units as a JSON-able dict of their fields."""
         return dataclasses.asdict(self)
 
 

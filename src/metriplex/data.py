@@ -232,10 +232,12 @@ class Trajectories:
     # -- views ----------------------------------------------------------------------------------
     @property
     def n(self) -> int:
+        """The number of state variables."""
         return int(self.x.shape[1])
 
     @property
     def ids(self) -> np.ndarray:
+        """The trajectory ids, sorted, each once."""
         return np.unique(self.trajectory)
 
     def __len__(self) -> int:
@@ -251,9 +253,12 @@ class Trajectories:
             yield self.t[s : s + c], self.x[s : s + c]
 
     def lengths(self) -> np.ndarray:
+        """The number of samples of each trajectory, in the order of :attr:`ids`."""
         return self._bounds()[1]
 
     def select(self, ids: Sequence[int]) -> "Trajectories":
+        """The trajectories whose ids are in ``ids`` (in the order of their ids; ids that the data
+        lack are ignored)."""
         m = np.isin(self.trajectory, np.asarray(ids))
         return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
 
@@ -323,4 +328,5 @@ class Trajectories:
                 "shape": [int(len(self.t)), self.n], "sha256": h.hexdigest()}
 
     def with_names(self, names: Sequence[str]) -> "Trajectories":
+        """The same data with the variables called ``names``."""
         return Trajectories(self.trajectory, self.t, self.x, tuple(names))

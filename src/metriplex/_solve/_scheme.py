@@ -34,4 +34,8 @@ class AbstractScheme(eqx.Module):
 
     @abc.abstractmethod
     def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
-                 terms1: Terms) -> State: ...
+                 terms1: Terms) -> State:
+        r"""The defect of the data pair ``x0 -> x1`` over a step ``dt`` under this scheme,
+        :math:`(x_1 - x_0)/\Delta t` minus the scheme's field, shape ``(n,)``; ``terms0`` and
+        ``terms1`` are :class:`~metriplex.Terms` at the two states, shared by every loss term (zero
+        on data that the scheme made)."""

@@ -124,10 +124,14 @@ class DiscreteGradient(_Implicit):
     summary: ClassVar[str] = "keeps any learned E exactly and dS >= 0"
 
     def start(self, model: GenericModel, x0: State) -> tuple[Scalar, Scalar]:
+        """What the step needs of its first state: :math:`E(x_0)` and :math:`S(x_0)`, computed once
+        per step."""
         return model.energy(x0), model.entropy(x0)
 
     def average(self, model: GenericModel, x0: State, x1: State,
                 start: tuple[Scalar, Scalar]) -> State:
+        """The discrete GENERIC field between ``x0`` and ``x1`` (:func:`discrete_generic_field`),
+        with ``start`` the energy and entropy at ``x0``."""
         energy0, entropy0 = start
         return discrete_generic_field(
             model, x0, x1, energy0, model.energy(x1), entropy0, model.entropy(x1)
@@ -135,6 +139,11 @@ class DiscreteGradient(_Implicit):
 
     def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
                  terms1: Terms, mid: Terms | None = None) -> State:
+        r"""The defect of the data pair ``x0 -> x1`` over a step ``dt`` under this scheme,
+        :math:`(x_1 - x_0)/\Delta t` minus the scheme's field, shape ``(n,)``; ``terms0`` and
+        ``terms1`` are :class:`~metriplex.Terms` at the two states, shared by every loss term (zero
+        on data that the scheme made). ``mid``: the terms at the midpoint, where a loss has them
+        already."""
         field = discrete_generic_field(
             model, x0, x1, terms0.energy, terms1.energy, terms0.entropy, terms1.entropy, mid
         )

@@ -17,6 +17,7 @@ class ImplicitMidpoint(_Implicit):
     summary: ClassVar[str] = "implicit midpoint: keeps a quadratic E"
 
     def average(self, model: GenericModel, x0: State, x1: State, start: Any) -> State:
+        r"""The field at the midpoint, :math:`f(\tfrac12(x_0 + x_1))` (``start`` is not needed)."""
         return model.vector_field(0.5 * (x0 + x1))
 
     def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,

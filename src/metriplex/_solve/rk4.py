@@ -19,6 +19,7 @@ class RK4(AbstractScheme):
     summary: ClassVar[str] = "explicit, fourth order: no implicit solve"
 
     def advance(self, model: GenericModel, x: State, dt: Scalar | float) -> State:
+        """The state one classical Runge–Kutta step of size ``dt`` after ``x``."""
         f = model.vector_field
         k1 = f(x)
         k2 = f(x + 0.5 * dt * k1)

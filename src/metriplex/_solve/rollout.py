@@ -33,6 +33,7 @@ class Rollout(NamedTuple):
 
     @property
     def ok(self) -> bool:
+        """Whether every trajectory was rolled out to its last time."""
         return bool(np.all(np.asarray(self.failed_step) < 0))
 
 
@@ -145,6 +146,8 @@ def _check_inputs(x0, ts, n):
 
 
 def model_size(model: GenericModel) -> int | None:
+    """The number of state variables of ``model``, from the first of its blocks that states it
+    (``None`` where none does, e.g. a model of known functions only)."""
     for block in (model.poisson, model.friction, model.energy):
         n = getattr(block, "n", None)
         if isinstance(n, int):

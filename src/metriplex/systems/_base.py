@@ -35,6 +35,7 @@ class Settings:
 
     @property
     def horizon(self) -> float:
+        """The time that ``steps`` steps of size ``dt`` span."""
         return self.dt * self.steps
 
 
@@ -74,6 +75,7 @@ class System(abc.ABC):
 
     @property
     def n(self) -> int:
+        """The number of state variables."""
         return len(self.names)
 
     @property

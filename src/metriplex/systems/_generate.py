@@ -56,6 +56,8 @@ class Substeps(AbstractScheme):
 
     def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
                  terms1: Terms) -> State:
+        """The defect of the data pair ``x0 -> x1`` against ``count`` inner steps from ``x0``, over
+        ``dt``; ``terms0`` and ``terms1`` are not needed."""
         return (x1 - self.step(model, x0, dt, x0)[0]) / dt
 
 

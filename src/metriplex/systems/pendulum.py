@@ -124,6 +124,7 @@ class PendulumConfig:
 
     @property
     def settings(self) -> Settings:
+        """The published data settings of this parameter set."""
         if self.parameter_set == "spnn":
             return Settings(0.3, 199, 50, "SPNN dataset: 50 trajectories x 200 snapshots")
         return Settings(0.1, 400, 100, "100 trajectories on t in [0, 40]")

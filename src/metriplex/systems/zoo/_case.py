@@ -43,10 +43,12 @@ class ZooCase:
 
     @property
     def name(self) -> str:
+        """The system's name, which names the case."""
         return self.system.name
 
     @property
     def horizon_steps(self) -> int:
+        """How many steps the test trajectories are rolled out: ``test_steps``, or ``steps``."""
         return self.steps if self.test_steps is None else self.test_steps
 
 
