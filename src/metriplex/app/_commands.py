@@ -53,6 +53,8 @@ def _positive_finite(value, option: str) -> None:
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
+    """Write trajectories of a built-in system (``metriplex simulate``): from ``--trajectories``
+    initial states drawn with ``--seed``, ``--steps`` steps of ``--dt`` each, to ``--out``."""
     from .. import systems
     from .config import check_seed
     from ..io import write
@@ -105,7 +107,10 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
     return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
-def cmd_train(args: argparse.Namespace) -> None:
+def cmd_train(args: argparse.Namespace) -> int | None:
+    """Train a model on ``args.data`` into the run folder ``--out`` (``metriplex train``), evaluate
+    it on the validation trajectories and print a summary; the exit status 130 when the training was
+    interrupted, else ``None``."""
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from .config import validate
@@ -154,6 +159,9 @@ def cmd_train(args: argparse.Namespace) -> None:
 
 
 def cmd_rollout(args: argparse.Namespace) -> None:
+    """Roll a trained model out from the first state of every chosen trajectory of ``args.data`` on
+    its own grid (``metriplex rollout``), writing the predictions to ``--out`` and each trajectory's
+    status beside it."""
     import numpy as np
 
     from ..data import Trajectories
@@ -267,7 +275,10 @@ def _scheme(args) -> str:
     return run_config(args.run).get("config", {}).get("scheme", "cn")
 
 
-def cmd_evaluate(args: argparse.Namespace) -> None:
+def cmd_evaluate(args: argparse.Namespace) -> int | None:
+    """Print the metrics and the verdict of a trained model on ``args.data`` (``metriplex
+    evaluate``), optionally writing them (``--out``) and the figures (``--figures``); with
+    ``--strict`` the verdict's exit status, else ``None``."""
     import json
 
     from ..io import check_output_file, check_output_folder, load, write_json
@@ -325,6 +336,7 @@ def cmd_evaluate(args: argparse.Namespace) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> None:
+    """Run a reference experiment end to end into its run folder (``metriplex reproduce``)."""
     from ._lock import RunLock
     from .experiments import default_out, run_experiment
     from .runs import check_run_folder

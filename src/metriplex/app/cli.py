@@ -128,6 +128,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``metriplex`` command line: one subcommand per ``cmd_*`` function, every option with its
+    help."""
     parser = _Parser(
         prog="metriplex",
         description="Learn thermodynamically consistent (GENERIC) dynamics "
@@ -275,6 +277,9 @@ def _systems_help() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the ``metriplex`` command with ``argv`` (default: ``sys.argv[1:]``); the exit status: 0
+    on success, 2 on bad input (one message on stderr), 130 when interrupted, or the command's own.
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

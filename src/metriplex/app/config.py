@@ -99,10 +99,14 @@ class RunConfig:
     input_noise: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
+        """The settings as a JSON-able dict, one entry per field: :meth:`from_json` rebuilds
+        them."""
         return dataclasses.asdict(self)
 
     @classmethod
     def from_json(cls, obj: dict[str, Any]) -> "RunConfig":
+        """The configuration that :meth:`to_json` wrote; fields left out take their defaults, and an
+        unknown key is refused."""
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(obj) - known)
         if unknown:
@@ -387,6 +391,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def preset(name: str, **overrides: Any) -> RunConfig:
+    """The configuration of the preset ``name`` (:data:`PRESETS`), with the fields in ``overrides``
+    replaced."""
     if name not in PRESETS:
         raise MetriplexError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}.")
     return RunConfig(**{**PRESETS[name], **overrides})

@@ -246,6 +246,8 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
 
 
 def run_config(run_dir: str | Path) -> dict:
+    """The contents of the run folder's ``config.json`` (an empty dict without one); a damaged file
+    is refused with a message that says how to repair the folder."""
     path = Path(run_dir) / "config.json"
     if not path.is_file():
         return {}

@@ -39,6 +39,9 @@ from ..runs import train_run
 
 @dataclasses.dataclass(frozen=True)
 class Size:
+    """The data and training sizes of one version (full or quick) of an experiment: training
+    ``trajectories`` of ``steps`` steps, ``train_steps`` optimiser steps, and ``test_trajectories``
+    unseen ones of ``test_steps`` steps."""
     trajectories: int
     steps: int
     train_steps: int
