@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import MetriplexError
-from .._types import Scalar, State
+from .._types import Array, Float, Scalar, State
 from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, data_statistics, network_spec, standardise
 from ._abstract import AbstractPotential
 from ._registry import register
@@ -64,7 +64,7 @@ class FeatureMap(eqx.Module):
                 f"{bad}."
             )
 
-    def __call__(self, x: State) -> jax.Array:
+    def __call__(self, x: State) -> Float[Array, " features"]:
         """The features of the state ``x``: the squared distances, then the passed components; shape
         ``(size,)``."""
         parts = []

@@ -28,7 +28,6 @@ from .._types import State
 from ._mlp import data_statistics, standardise
 
 if TYPE_CHECKING:
-    import jax
     from numpy.typing import ArrayLike
 
 
@@ -98,7 +97,7 @@ def scaling_spec(scaling: Scaling | None) -> dict | None:
     return None if scaling is None else scaling.to_json()
 
 
-def standardise_state(x: State, scaling: Scaling | None) -> jax.Array:
+def standardise_state(x: State, scaling: Scaling | None) -> State:
     """What a block's network sees of the state: :math:`D^{-1}(x - c)`, or ``x`` itself without
     a scaling."""
     return x if scaling is None else standardise(x, scaling.shift, scaling.scale)

@@ -32,14 +32,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
 from ..._errors import MetriplexError
 from ..._model import GenericModel
-from ..._types import Matrix, Scalar, State
+from ..._types import Array, Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
 from .._base import System, _uniform_box, analytic_model
 from ._case import ZooCase, case_settings
@@ -102,7 +101,8 @@ class StiffThermalOscillatorConfig:
         return self.conduction_rate / float(np.sqrt(self.stiffness / self.mass))
 
 
-def reservoir_temperatures(config: StiffThermalOscillatorConfig, s: jax.Array) -> jax.Array:
+def reservoir_temperatures(config: StiffThermalOscillatorConfig,
+                           s: Float[Array, "*batch 2"]) -> Float[Array, "*batch 2"]:
     r""":math:`\theta_i = \theta_0 e^{s_i/c_i}` for ``s`` of shape ``(..., 2)``."""
     return bath_temperature(s, jnp.asarray(config.heat_capacity, dtype=s.dtype), config.theta0)
 
