@@ -44,6 +44,7 @@ from .losses import JacobiPenalty as JacobiPenalty
 from .losses import Loss as Loss
 from .losses import MidpointResidual as MidpointResidual
 from .losses import PoissonDegeneracy as PoissonDegeneracy
+from ._rollout_loss import RolloutWindow as RolloutWindow
 from .losses import SchemeResidual as SchemeResidual
 from .losses import StochasticJacobi as StochasticJacobi
 from .structure import CanonicalPoisson as CanonicalPoisson

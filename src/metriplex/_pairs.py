@@ -13,7 +13,7 @@ import numpy as np
 
 from ._errors import MetriplexError
 from .data import Pairs, Trajectories
-from .losses import Batch
+from .losses import Batch, Window
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -79,15 +79,26 @@ class PairRows(NamedTuple):
         if not np.all(np.isfinite(self.x)):
             raise MetriplexError(f"{what} data contain NaN or inf; clean them before training.")
 
-    def batch(self, idx: ArrayLike, scale: ArrayLike, dtype: DTypeLike) -> Batch:
-        """The pairs ``idx`` (a few thousand: evaluation subsets) as a :class:`Batch`."""
+    def batch(self, idx: ArrayLike, scale: ArrayLike, dtype: DTypeLike,
+              window_shape: tuple[int, int] | None = None) -> Batch:
+        """The pairs ``idx`` (a few thousand: evaluation subsets) as a :class:`Batch`, with
+        the :class:`Window` of ``window_shape`` as :meth:`PairStore.take` gathers it."""
         idx = np.asarray(idx)
 
         def put(a):
             return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))
 
+        window = None
+        if window_shape is not None:
+            w, k = window_shape
+            start = idx[:w]
+            j = np.arange(k)
+            pairs = np.minimum(start[:, None] + j[None, :], self.count - 1)
+            window = Window(put(self.x[self.first[start]]), put(self.x[self.second[pairs]]),
+                            put(self.dt[pairs]),
+                            jnp.asarray(j[None, :] <= _ahead(self)[start][:, None]))
         return Batch(put(self.x[self.first[idx]]), put(self.x[self.second[idx]]),
-                     put(self.dt[idx]), jnp.asarray(scale, dtype))
+                     put(self.dt[idx]), jnp.asarray(scale, dtype), window)
 
 
 class PairStore(NamedTuple):
@@ -99,6 +110,7 @@ class PairStore(NamedTuple):
     second: jax.Array
     dt: jax.Array
     scale: jax.Array
+    ahead: jax.Array  # (P,) int: how many of the next pairs continue pair k's trajectory
 
     @classmethod
     def of(cls, rows: PairRows, scale: ArrayLike, dtype: DTypeLike) -> "PairStore":
@@ -106,12 +118,33 @@ class PairStore(NamedTuple):
             return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
 
         return cls(put(rows.x), jnp.asarray(rows.first), jnp.asarray(rows.second),
-                   put(rows.dt), jnp.asarray(scale, dtype))
+                   put(rows.dt), jnp.asarray(scale, dtype), jnp.asarray(_ahead(rows)))
 
     @property
     def count(self) -> int:
         return int(self.first.shape[0])
 
-    def take(self, idx: jax.Array) -> Batch:
+    def take(self, idx: jax.Array, window_shape: tuple[int, int] | None = None) -> Batch:
+        """The pairs ``idx`` as a :class:`Batch`; with ``window_shape`` ``(W, K)``, also the
+        :class:`Window` of the ``K`` steps that follow the first state of each of the first
+        ``W`` pairs (masked past their trajectory's end)."""
+        window = None
+        if window_shape is not None:
+            w, k = window_shape
+            start = idx[:w].astype(self.first.dtype)
+            j = jnp.arange(k, dtype=self.first.dtype)
+            pairs = jnp.minimum(start[:, None] + j[None, :], self.count - 1)
+            window = Window(self.x[self.first[start]], self.x[self.second[pairs]],
+                            self.dt[pairs], j[None, :] <= self.ahead[start][:, None])
         return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
-                     self.scale)
+                     self.scale, window)
+
+
+def _ahead(rows: PairRows) -> np.ndarray:
+    """For each pair, how many of the pairs after it continue its trajectory (pair ``k + 1``
+    starts where pair ``k`` ends)."""
+    P = rows.count
+    ends = np.flatnonzero(rows.second[:-1] != rows.first[1:])  # last pair of each run
+    ends = np.append(ends, P - 1)
+    k = np.arange(P)
+    return (ends[np.searchsorted(ends, k)] - k).astype(rows.first.dtype)

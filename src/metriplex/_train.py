@@ -154,7 +154,7 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any,
             params, opt_state = carry
             kb, kl = jr.split(k)
             idx = jr.randint(kb, (batch_size,), 0, n_train)
-            batch = full_train.take(idx)
+            batch = full_train.take(idx, loss.window_shape)
             if noise is not None:
                 kn = jr.fold_in(kl, 1)
                 eps = jr.normal(kn, batch.x0.shape, batch.x0.dtype) * noise[None, :]
@@ -344,6 +344,8 @@ def batch_sharding(enabled: bool, batch_size: int) -> Callable[[Batch], Batch] |
 
     def shard(batch: Batch) -> Batch:
         c = jax.lax.with_sharding_constraint
-        return Batch(c(batch.x0, rows), c(batch.x1, rows), c(batch.dt, rows), c(batch.scale, whole))
+        # Windows, where the loss reads any, stay as the step gathered them.
+        return batch._replace(x0=c(batch.x0, rows), x1=c(batch.x1, rows), dt=c(batch.dt, rows),
+                              scale=c(batch.scale, whole))
 
     return shard

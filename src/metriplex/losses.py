@@ -38,11 +38,23 @@ from ._types import Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
 
 
+class Window(NamedTuple):
+    """Stretches of ``K`` consecutive steps of the training trajectories, for
+    :class:`RolloutWindow`: from ``x0`` ``(W, n)``, the data ``targets`` ``(W, K, n)`` after
+    steps ``dt`` ``(W, K)``; ``mask`` ``(W, K)`` is ``False`` past a trajectory's end."""
+
+    x0: jax.Array
+    targets: jax.Array
+    dt: jax.Array
+    mask: jax.Array
+
+
 class Batch(NamedTuple):
     x0: jax.Array  # (B, n)
     x1: jax.Array  # (B, n)
     dt: jax.Array  # (B,)
     scale: jax.Array  # (n,) per-component data scale
+    window: Window | None = None  # training batches of a loss with a RolloutWindow term
 
 
 class Context(NamedTuple):
@@ -60,6 +72,13 @@ class AbstractLossTerm(eqx.Module):
     def needs_midpoints(self) -> bool:
         """Whether this term reads ``ctx.mid`` (then :class:`Loss` evaluates it once)."""
         return False
+
+    @property
+    def window_shape(self) -> tuple[int, int] | None:
+        """``(windows, steps)`` of the :class:`Window` this term reads from ``batch.window``,
+        or ``None``. A term that reads windows is left out where a batch has none (the
+        evaluation subsets of pairs)."""
+        return None
 
     @abc.abstractmethod
     def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
@@ -113,6 +132,15 @@ class Loss(eqx.Module):
     def names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.terms)
 
+    @property
+    def window_shape(self) -> tuple[int, int] | None:
+        """``(windows, steps)`` that the training batches must carry (the largest asked for by
+        any term), or ``None`` when no term reads windows."""
+        shapes = [t.window_shape for t in self.terms if t.window_shape is not None]
+        if not shapes:
+            return None
+        return max(w for w, _ in shapes), max(k for _, k in shapes)
+
     def __call__(self, model: GenericModel, batch: Batch, *,
                  key: jax.Array | None = None) -> tuple[jax.Array, dict[str, jax.Array]]:
         # One evaluation over both states of every pair: twice-as-tall matmuls and half as
@@ -133,6 +161,8 @@ class Loss(eqx.Module):
         parts: dict[str, jax.Array] = {}
         total = jnp.zeros((), batch.x0.dtype)
         for term, w, k in zip(self.terms, self.weights, keys):
+            if term.window_shape is not None and batch.window is None:
+                continue
             value = term(model, batch, ctx, k)
             parts[term.name] = parts.get(term.name, 0.0) + value
             total = total + w * value

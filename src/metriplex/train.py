@@ -194,7 +194,9 @@ def fit(
         return loss(eqx.combine(params, static), batch, key=key)
 
     # Evaluations see fixed spread subsets of the pairs.
-    train_eval = train_rows.batch(spread(n_train, 4096), scale, dtype)
+    # The training subset carries windows like the training batches (its figures are the
+    # first of the training history); the validation subset judges the pair loss.
+    train_eval = train_rows.batch(spread(n_train, 4096), scale, dtype, loss.window_shape)
     valid_eval = None if valid_rows is None else valid_rows.batch(
         spread(valid_rows.count, 4096), scale, dtype)
 
@@ -334,7 +336,7 @@ def fit(
         nonlocal bar
         solver, chunk = make_lbfgs_chunk(loss, static)
         chunk = eqx.filter_jit(chunk)
-        pairs = full_train.take(jnp.asarray(spread(n_train, lbfgs_pairs)))
+        pairs = full_train.take(jnp.asarray(spread(n_train, lbfgs_pairs)), loss.window_shape)
         state.params = state.best_params
         opt_state = solver.init(state.params)
         bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",

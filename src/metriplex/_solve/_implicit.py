@@ -63,6 +63,10 @@ class _Implicit(AbstractScheme):
     def increment(self, model: GenericModel, x0: State, x1: State) -> State:
         return self.average(model, x0, x1, self.start(model, x0))
 
+    def differentiable_step(self, model: GenericModel, x: State, dt: Scalar | float,
+                            solved: State) -> State:
+        return x + dt * self.increment(model, x, solved)
+
     def step(self, model: GenericModel, x: State, dt: Scalar | float,
              guess: State) -> tuple[State, jax.Array, jax.Array]:
         y, ok, its = self.step_batch(model, x[None], jnp.asarray(dt)[None], guess[None])

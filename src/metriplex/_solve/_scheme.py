@@ -32,6 +32,18 @@ class AbstractScheme(eqx.Module):
         """:meth:`step` for a batch of states ``x`` ``(B, n)``, steps ``dt`` ``(B,)``."""
         return jax.vmap(lambda x, dt, g: self.step(model, x, dt, g))(x, dt, guess)
 
+    def differentiable_step(self, model: GenericModel, x: State, dt: Scalar | float,
+                            solved: State) -> State:
+        r"""The step from ``x`` as a function that JAX can differentiate in ``model`` and
+        ``x``, given the step's result ``solved`` (a constant: a root finder's result cannot
+        be differentiated through). Explicit schemes return their step; implicit ones one
+        update :math:`x + \Delta t\,\bar f(x, x_1)` at the solved :math:`x_1`, whose
+        derivative is the implicit step's to first order in ``dt`` (the step's Jacobian
+        factor :math:`(I - \Delta t\,\partial\bar f/\partial x_1)^{-1}` taken as ``I``).
+        Used by :class:`~metriplex.RolloutWindow` to train through rollouts. By default the
+        step itself, started at ``solved``."""
+        return self.step(model, x, dt, solved)[0]
+
     @abc.abstractmethod
     def residual(self, model: GenericModel, x0: State, x1: State, dt: Scalar, terms0: Terms,
                  terms1: Terms) -> State:

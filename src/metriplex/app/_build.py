@@ -27,6 +27,7 @@ from .config import (
     scheme_from_name,
     validate,
 )
+from .._rollout_loss import RolloutWindow
 from ..data import Trajectories
 from ..losses import (
     AbstractJacobiEstimator,
@@ -116,7 +117,10 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     means the same on any data.
     """
     e, s, tau = (1.0, 1.0, 1.0) if units is None else (units.energy, units.entropy, units.time)
-    loss = config.w_traj * SchemeResidual(scheme_from_name(config.scheme))
+    scheme = scheme_from_name(config.scheme)
+    loss = config.w_traj * SchemeResidual(scheme)
+    if config.window_steps > 0:
+        loss = loss + config.w_traj * RolloutWindow(scheme, steps=config.window_steps)
     exact_L, exact_M = exact_blocks(config)
     learned_L = config.poisson in LEARNED_POISSON
     at_midpoints = _at_midpoints(config)

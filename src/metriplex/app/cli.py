@@ -118,6 +118,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--input-noise", type=float, metavar="FRACTION", help="Gaussian noise on "
                    "both states of every training pair, as a fraction of each variable's "
                    f"standard deviation (default {d.input_noise}; 0 for none)")
+    w.add_argument("--window-steps", type=int, metavar="K", help="also train on rollouts "
+                   "of K steps from the first states of 32 training pairs per batch, against "
+                   "the data that follow them: errors that compound over a rollout are "
+                   f"trained away (default {d.window_steps}; 0 for none)")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")

@@ -25,7 +25,6 @@ from ..structure.friction import ZeroFriction
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
 from ..structure.potential import FeatureMap, SumOf, ZeroPotential
 
-# What each option may say and its help text, importable from here as before.
 from ._choices import (  # noqa: F401
     DEGENERACY_POINTS,
     ENERGY_CHOICES,
@@ -97,6 +96,7 @@ class RunConfig:
     data_parallel: bool = False
     lbfgs_steps: int = 0
     input_noise: float = 0.0
+    window_steps: int = 0
 
     def to_json(self) -> dict[str, Any]:
         """The settings as a JSON-able dict, one entry per field: :meth:`from_json` rebuilds
@@ -242,11 +242,12 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
-    if config.lbfgs_steps < 0:
-        raise MetriplexError(
-            f"--lbfgs-steps must be >= 0 (iterations of the L-BFGS finish; 0 for none); got "
-            f"{config.lbfgs_steps}."
-        )
+    for name, meaning in (("lbfgs_steps", "iterations of the L-BFGS finish"),
+                          ("window_steps", "steps of the training rollouts from data states")):
+        v = getattr(config, name)
+        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+            raise MetriplexError(f"--{name.replace('_', '-')} must be an integer >= 0 "
+                                 f"({meaning}; 0 for none); got {v!r}.")
     if not 0 <= config.input_noise < 1:
         raise MetriplexError(
             f"--input-noise must be in [0, 1) (a fraction of each variable's standard "
