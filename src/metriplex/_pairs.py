@@ -13,7 +13,7 @@ import numpy as np
 
 from ._errors import MetriplexError
 from .data import Pairs, Trajectories
-from .losses import Batch, Window
+from ._loss_base import Batch, Window
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 from ._errors import MetriplexError, expect_instance
 from ._model import GenericModel
 from .integrate import AbstractScheme, CrankNicolson
-from .losses import AbstractLossTerm, Batch, Context
+from ._loss_base import AbstractLossTerm, Batch, Context
 
 
 def _frozen(model: GenericModel) -> GenericModel:

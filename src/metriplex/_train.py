@@ -52,10 +52,12 @@ class History:
     lbfgs_steps: int = 0
 
     def to_json(self) -> dict[str, Any]:
+        """The history as a JSON-able dict (``history.json`` of a run folder)."""
         return dataclasses.asdict(self)
 
     @classmethod
     def from_json(cls, obj: dict[str, Any]) -> "History":
+        """The history that :meth:`to_json` wrote; unknown keys are ignored."""
         known = {f.name for f in dataclasses.fields(cls)}
         return cls(**{k: v for k, v in obj.items() if k in known})
 

@@ -25,7 +25,6 @@ from __future__ import annotations
 import abc
 import numbers
 from typing import ClassVar
-from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -33,140 +32,10 @@ import jax.numpy as jnp
 import jax.random as jr
 
 from ._errors import MetriplexError, expect_instance
+from ._loss_base import AbstractLossTerm, Batch, Context, Loss, Window  # noqa: F401
 from ._model import GenericModel, Terms
 from ._types import Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
-
-
-class Window(NamedTuple):
-    """Stretches of ``K`` consecutive steps of the training trajectories, for
-    :class:`RolloutWindow`: from ``x0`` ``(W, n)``, the data ``targets`` ``(W, K, n)`` after
-    steps ``dt`` ``(W, K)``; ``mask`` ``(W, K)`` is ``False`` past a trajectory's end."""
-
-    x0: jax.Array
-    targets: jax.Array
-    dt: jax.Array
-    mask: jax.Array
-
-
-class Batch(NamedTuple):
-    x0: jax.Array  # (B, n)
-    x1: jax.Array  # (B, n)
-    dt: jax.Array  # (B,)
-    scale: jax.Array  # (n,) per-component data scale
-    window: Window | None = None  # training batches of a loss with a RolloutWindow term
-
-
-class Context(NamedTuple):
-    terms0: Terms  # batched over B
-    terms1: Terms
-    mid: Terms | None = None  # at the midpoints (x0 + x1)/2, when a term asks for them
-
-
-class AbstractLossTerm(eqx.Module):
-    """One named term of the loss; returns the batch mean of a squared norm."""
-
-    name: ClassVar[str] = ""
-
-    @property
-    def needs_midpoints(self) -> bool:
-        """Whether this term reads ``ctx.mid`` (then :class:`Loss` evaluates it once)."""
-        return False
-
-    @property
-    def window_shape(self) -> tuple[int, int] | None:
-        """``(windows, steps)`` of the :class:`Window` this term reads from ``batch.window``,
-        or ``None``. A term that reads windows is left out where a batch has none (the
-        evaluation subsets of pairs)."""
-        return None
-
-    @abc.abstractmethod
-    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
-                 key: jax.Array) -> jax.Array: ...
-
-    def as_loss(self) -> "Loss":
-        return Loss((self,), (1.0,))
-
-    def __add__(self, other):
-        return self.as_loss() + other
-
-    def __radd__(self, other):
-        return self.as_loss().__radd__(other)
-
-    def __mul__(self, w):
-        return self.as_loss() * w
-
-    __rmul__ = __mul__
-
-
-class Loss(eqx.Module):
-    """A weighted sum of loss terms. ``loss(model, batch, key=k)`` returns ``(total, parts)``."""
-
-    terms: tuple[AbstractLossTerm, ...]
-    weights: tuple[float, ...] = eqx.field(static=True)
-
-    def as_loss(self) -> "Loss":
-        return self
-
-    def __add__(self, other):
-        if isinstance(other, (int, float)) and other == 0:
-            return self
-        other = other.as_loss()
-        return Loss(self.terms + other.terms, self.weights + other.weights)
-
-    def __radd__(self, other):
-        if isinstance(other, (int, float)) and other == 0:
-            return self
-        return NotImplemented
-
-    def __mul__(self, w):
-        if not isinstance(w, (int, float)):
-            return NotImplemented
-        if w < 0:
-            raise MetriplexError(f"loss weights must be >= 0; got {w}.")
-        return Loss(self.terms, tuple(float(w) * v for v in self.weights))
-
-    __rmul__ = __mul__
-
-    @property
-    def names(self) -> tuple[str, ...]:
-        return tuple(t.name for t in self.terms)
-
-    @property
-    def window_shape(self) -> tuple[int, int] | None:
-        """``(windows, steps)`` that the training batches must carry (the largest asked for by
-        any term), or ``None`` when no term reads windows."""
-        shapes = [t.window_shape for t in self.terms if t.window_shape is not None]
-        if not shapes:
-            return None
-        return max(w for w, _ in shapes), max(k for _, k in shapes)
-
-    def __call__(self, model: GenericModel, batch: Batch, *,
-                 key: jax.Array | None = None) -> tuple[jax.Array, dict[str, jax.Array]]:
-        # One evaluation over both states of every pair: twice-as-tall matmuls and half as
-        # many kernels as two separate vmaps (see docs/performance.md).
-        # Terms nobody reads (e.g. gradients at the states when only the discrete-gradient
-        # residual and midpoint penalties are used) are removed by XLA under jit.
-        B = batch.x0.shape[0]
-        both = jax.vmap(model.terms)(jnp.concatenate([batch.x0, batch.x1]))
-        mid = None
-        if any(t.needs_midpoints for t in self.terms):
-            mid = jax.vmap(model.terms)(0.5 * (batch.x0 + batch.x1))
-        ctx = Context(
-            jax.tree_util.tree_map(lambda a: a[:B], both),
-            jax.tree_util.tree_map(lambda a: a[B:], both),
-            mid,
-        )
-        keys = jr.split(jr.key(0) if key is None else key, len(self.terms))
-        parts: dict[str, jax.Array] = {}
-        total = jnp.zeros((), batch.x0.dtype)
-        for term, w, k in zip(self.terms, self.weights, keys):
-            if term.window_shape is not None and batch.window is None:
-                continue
-            value = term(model, batch, ctx, k)
-            parts[term.name] = parts.get(term.name, 0.0) + value
-            total = total + w * value
-        return total, parts
 
 
 def _sq(v, scale):

@@ -95,61 +95,59 @@ def fit(
     to 1%). The validation score is the error of short rollouts of the held-out trajectories
     (``rollout_check``): the model kept is the one that rolls out best.
 
-    Parameters
-    ----------
-    data:
-        :class:`~metriplex.Trajectories` (pairs of consecutive samples, each with its own dt),
-        or ready :class:`~metriplex.data.Pairs`.
-    loss:
-        Default: :func:`~metriplex.CrankNicolsonResidual`.
-    learning_rate:
-        Peak Adam learning rate (default 1e-2; every loss is measured in the data's own units,
-        so one rate serves data of any scale).
-    weight_decay:
-        Decoupled weight decay (AdamW) of the default optimiser (default 0).
-    steps:
-        The most optimiser steps (default 30 000).
-    validation:
-        Fraction of trajectories held out (default 0.2; split **by trajectory**), explicit
-        validation ``Trajectories``, or ``None``/``0`` for none. The returned model is the one
-        with the best validation score (or training loss without validation).
-    stopping:
-        A :class:`Plateau` (default), or ``None`` for exactly ``steps`` steps of a cosine
-        schedule (``default_optimizer``), optionally ended by ``patience``.
-    rollout_check:
-        A :class:`RolloutCheck` (default) to score evaluations by held-out rollouts, or
-        ``None`` to score them by the validation loss only.
-    patience:
-        Evaluations without improvement before a plateau (overrides ``stopping.patience``);
-        with ``stopping=None``, before training stops.
-    max_seconds:
-        Stop after this much training time (a budget, like ``steps``).
-    scale:
-        Per-component rate scale in which residuals are measured (default
-        :math:`d_i/\tau`: the standard deviation of the training states, 1 for constant
-        columns, over the data's time scale :func:`~metriplex.data.time_scale`; so the loss
-        does not depend on the units of time or of the state).
-    dtype:
-        ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the model's.
-    checkpoint:
-        Path of a checkpoint file, written atomically every ``checkpoint_every`` evaluations,
-        on Ctrl-C and at the end: parameters, optimiser state, step, PRNG key, best model and
-        history. With ``resume=True`` training continues from it and reaches the same result as
-        an uninterrupted run with the same arguments.
-    data_parallel:
-        Split every minibatch over all local devices (``jax.devices()``) with JAX sharding:
-        parameters are replicated, the batch axis is sharded, and XLA inserts the gradient
-        all-reduce. The result equals single-device training to rounding. ``batch_size`` must be
-        a multiple of the device count. Across hosts, call ``jax.distributed.initialize()``
-        first (see docs/performance.md).
-    lbfgs_steps:
-        Iterations of an L-BFGS finish (:func:`optax.lbfgs`) after the Adam stage, on the loss
-        of up to ``lbfgs_pairs`` fixed training pairs (evenly spread), evaluated every
-        ``eval_every`` iterations; its model is kept only where the validation score improves.
-        0 (default) for none.
-    input_noise:
-        Standard deviation of Gaussian noise added to both states of every training pair, as a
-        fraction of each variable's standard deviation (default 0: none).
+    ``data``: :class:`~metriplex.Trajectories` (pairs of consecutive samples, each with its own
+    dt), or ready :class:`~metriplex.data.Pairs`.
+
+    ``loss``: a :class:`~metriplex.Loss` (default :func:`~metriplex.CrankNicolsonResidual`).
+
+    ``learning_rate``: peak Adam learning rate (default 1e-2; every loss is measured in the
+    data's own units, so one rate serves data of any scale).
+
+    ``weight_decay``: decoupled weight decay (AdamW) of the default optimiser (default 0).
+
+    ``steps``: the most optimiser steps (default 30 000).
+
+    ``validation``: fraction of trajectories held out (default 0.2; split **by trajectory**),
+    explicit validation ``Trajectories``, or ``None``/``0`` for none. The returned model is the
+    one with the best validation score (or training loss without validation).
+
+    ``stopping``: a :class:`Plateau` (default), or ``None`` for exactly ``steps`` steps of a
+    cosine schedule (``default_optimizer``), optionally ended by ``patience``.
+
+    ``rollout_check``: a :class:`RolloutCheck` (default) to score evaluations by held-out
+    rollouts, or ``None`` to score them by the validation loss only.
+
+    ``patience``: evaluations without improvement before a plateau (overrides
+    ``stopping.patience``); with ``stopping=None``, before training stops.
+
+    ``max_seconds``: stop after this much training time (a budget, like ``steps``).
+
+    ``scale``: per-component rate scale in which residuals are measured (default
+    :math:`d_i/\tau`: the standard deviation of the training states, 1 for constant columns,
+    over the data's time scale :func:`~metriplex.data.time_scale`; so the loss does not depend
+    on the units of time or of the state).
+
+    ``dtype``: ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the
+    model's.
+
+    ``checkpoint``: path of a checkpoint file, written atomically every ``checkpoint_every``
+    evaluations, on Ctrl-C and at the end: parameters, optimiser state, step, PRNG key, best
+    model and history. With ``resume=True`` training continues from it and reaches the same
+    result as an uninterrupted run with the same arguments.
+
+    ``data_parallel``: split every minibatch over all local devices (``jax.devices()``) with JAX
+    sharding: parameters are replicated, the batch axis is sharded, and XLA inserts the gradient
+    all-reduce. The result equals single-device training to rounding. ``batch_size`` must be a
+    multiple of the device count. Across hosts, call ``jax.distributed.initialize()`` first (see
+    docs/performance.md).
+
+    ``lbfgs_steps``: iterations of an L-BFGS finish (:func:`optax.lbfgs`) after the Adam stage,
+    on the loss of up to ``lbfgs_pairs`` fixed training pairs (evenly spread), evaluated every
+    ``eval_every`` iterations; its model is kept only where the validation score improves. 0
+    (default) for none.
+
+    ``input_noise``: standard deviation of Gaussian noise added to both states of every training
+    pair, as a fraction of each variable's standard deviation (default 0: none).
 
     ```python
     model, history = fit(model, data, key=jr.key(0))
