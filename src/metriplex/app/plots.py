@@ -14,12 +14,18 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from ._layout import lay_out_once  # noqa: E402
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
     from numpy.typing import ArrayLike
 
     from .._train import History
+
+
+#: The resolution of the PNGs (the PDFs are vector graphics).
+SAVE_DPI = 150
 
 
 def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
@@ -29,7 +35,7 @@ def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
-    _lay_out_once(fig, SAVE_DPI)
+    lay_out_once(fig, SAVE_DPI)
     for ext in ("png", "pdf"):
         p = stem.with_suffix(f".{ext}")
         with atomic_write(p, "wb") as f:
@@ -49,35 +55,6 @@ def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
         paths.append(p)
     plt.close(fig)
     return paths
-
-
-#: The resolution of the PNGs (the PDFs are vector graphics).
-SAVE_DPI = 150
-
-
-def _lay_out_once(fig: Figure, dpi: float) -> None:
-    """Run ``fig``'s layout engine once, at the PNG's resolution, and switch it off.
-
-    ``savefig`` with a layout engine (even the placeholder that ``set_layout_engine("none")``
-    leaves) first draws the whole figure without output, to lay it out, then draws it for real:
-    two draws per format. Laid out here, each format is drawn once, to the same bytes (#16)."""
-    engine = fig.get_layout_engine()
-    if engine is None:
-        return
-    if fig.axes:  # as Figure.draw does: a figure without axes has nothing to lay out
-        old = fig.get_dpi()
-        fig.set_dpi(dpi)  # savefig measures the text at the output's dpi
-        try:
-            engine.execute(fig)
-        except ValueError:  # as Figure.draw does (a layout that cannot be satisfied)
-            pass
-        finally:
-            fig.set_dpi(old)
-    # None, not "none": print_figure draws once more before saving whenever an engine is set.
-    # The rc settings would otherwise turn None back into a default engine.
-    with matplotlib.rc_context({"figure.autolayout": False,
-                                "figure.constrained_layout.use": False}):
-        fig.set_layout_engine(None)
 
 
 def _axes(ax, figsize=(6, 4)):
