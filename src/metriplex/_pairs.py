@@ -91,12 +91,9 @@ class PairRows(NamedTuple):
         window = None
         if window_shape is not None:
             w, k = window_shape
-            start = idx[:w]
-            j = np.arange(k)
-            pairs = np.minimum(start[:, None] + j[None, :], self.count - 1)
-            window = Window(put(self.x[self.first[start]]), put(self.x[self.second[pairs]]),
-                            put(self.dt[pairs]),
-                            jnp.asarray(j[None, :] <= _ahead(self)[start][:, None]))
+            x0, targets, dt, mask = _window(np, self.x, self.first, self.second, self.dt,
+                                            _ahead(self), idx[:w], k)
+            window = Window(put(x0), put(targets), put(dt), jnp.asarray(mask))
         return Batch(put(self.x[self.first[idx]]), put(self.x[self.second[idx]]),
                      put(self.dt[idx]), jnp.asarray(scale, dtype), window)
 
@@ -131,13 +128,20 @@ class PairStore(NamedTuple):
         window = None
         if window_shape is not None:
             w, k = window_shape
-            start = idx[:w].astype(self.first.dtype)
-            j = jnp.arange(k, dtype=self.first.dtype)
-            pairs = jnp.minimum(start[:, None] + j[None, :], self.count - 1)
-            window = Window(self.x[self.first[start]], self.x[self.second[pairs]],
-                            self.dt[pairs], j[None, :] <= self.ahead[start][:, None])
+            window = _window(jnp, self.x, self.first, self.second, self.dt, self.ahead,
+                             idx[:w].astype(self.first.dtype), k)
         return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
                      self.scale, window)
+
+
+def _window(xp, x, first, second, dt, ahead, start, steps: int) -> Window:
+    """The :class:`Window` of ``steps`` pairs from each pair ``start``, gathered with the array
+    module ``xp`` (NumPy on the host, ``jax.numpy`` inside the compiled step); rows past the
+    end of a trajectory are clipped to valid pairs and masked."""
+    j = xp.arange(steps, dtype=first.dtype)
+    pairs = xp.minimum(start[:, None] + j[None, :], first.shape[0] - 1)
+    return Window(x[first[start]], x[second[pairs]], dt[pairs],
+                  j[None, :] <= ahead[start][:, None])
 
 
 def _ahead(rows: PairRows) -> np.ndarray:

@@ -9,6 +9,7 @@ compound are the ones trained away.
 
 from __future__ import annotations
 
+import numbers
 from typing import ClassVar
 
 import equinox as eqx
@@ -59,7 +60,8 @@ class RolloutWindow(AbstractLossTerm):
         expect_instance(self.scheme, AbstractScheme, what="RolloutWindow's scheme",
                         expected="a scheme such as CrankNicolson() (metriplex.integrate)")
         for what, value in (("steps", self.steps), ("windows", self.windows)):
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
+                    or value < 1:
                 raise MetriplexError(
                     f"RolloutWindow's {what} must be an integer >= 1; got {what}={value!r}."
                 )
