@@ -79,6 +79,26 @@ def standardised_error(model, data, scheme) -> tuple[float, list[float]]:
     return float(np.mean(errs)), errs
 
 
+def constant_drift(model, data, scheme) -> float | None:
+    """The largest change, over the test rollouts, of a variable that is constant along every
+    test trajectory, in standard deviations of that variable over the test data (``None`` when
+    no variable is constant)."""
+    out, xs, lengths = rollout_data(model, data, scheme=scheme)
+    xs = np.asarray(xs, np.float64)
+    constant = [i for i in range(xs.shape[2])
+                if all(np.ptp(xs[k, :T, i]) == 0.0 for k, T in enumerate(lengths))]
+    if not constant:
+        return None
+    pred = np.asarray(out.xs, np.float64)
+    d = data.x.std(axis=0)
+    worst = 0.0
+    for k, T in enumerate(lengths):
+        p = pred[k, :T][:, constant]
+        worst = max(worst, float(np.max(np.abs(p - p[0]) / np.where(d[constant] > 0,
+                                                                     d[constant], 1.0))))
+    return worst
+
+
 def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
     system = case.system
     t0 = time.perf_counter()
@@ -94,6 +114,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
     scheme = scheme_from_name(config.scheme)
     report = evaluate(model, test, scheme=scheme)
     std_mean, _ = standardised_error(model, test, scheme)
+    drift = constant_drift(model, test, scheme)
     truth = evaluate(system.model, test, scheme=scheme_from_name("cn"))
     flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in case.flags.items()) or "(none)"
     return {
@@ -106,6 +127,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "failed": int(report["rollout_failures"]),
         "test_trajectories": case.test_trajectories,
         "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
+        "constant_drift": drift,
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
@@ -144,6 +166,10 @@ def print_table(rows: list[dict], file=sys.stdout) -> None:
         )
     met = sum(r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
               for r in rows)
+    for r in rows:
+        if r.get("constant_drift") is not None:
+            print(f"\n{r['system']}: a variable constant along every test trajectory moves by up "
+                  f"to {r['constant_drift']:.2e} standard deviations in its rollouts.", file=file)
     print(f"\n{met} of {len(rows)} cases meet rel. L2 <= {BAR:g} (plain and standardised) with "
           "0 failed rollouts.", file=file)
 

@@ -21,9 +21,11 @@ def test_every_exported_block_states_whether_it_uses_the_gradient(base):
     for block in blocks:
         assert isinstance(block.__dict__.get("uses_gradient"), bool), block.__name__
     exact = {c.__name__ for c in blocks if c.uses_gradient}
-    # The exactly degenerate blocks read the gradient; all others must not claim to.
-    expected = ({"ProjectedSkewMLPPoisson", "EntropyCasimirPoisson3"}
-                if base is st.AbstractPoisson else {"ProjectedCholeskyFriction"})
+    # The exactly degenerate blocks read the gradient, and so may the masked ones, which pass
+    # it (masked) to the block they wrap; all others must not claim to.
+    expected = ({"ProjectedSkewMLPPoisson", "EntropyCasimirPoisson3", "MaskedPoisson"}
+                if base is st.AbstractPoisson
+                else {"ProjectedCholeskyFriction", "MaskedFriction"})
     assert exact == expected
 
 

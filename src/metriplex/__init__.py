@@ -54,6 +54,8 @@ from .structure import CholeskyFriction as CholeskyFriction
 from .structure import ConstantFriction as ConstantFriction
 from .structure import ConstantPoisson as ConstantPoisson
 from .structure import LiePoisson as LiePoisson
+from .structure import MaskedFriction as MaskedFriction
+from .structure import MaskedPoisson as MaskedPoisson
 from .structure import FeatureMap as FeatureMap
 from .structure import Known as Known
 from .structure import KnownFriction as KnownFriction

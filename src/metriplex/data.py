@@ -256,6 +256,16 @@ class Trajectories:
         """The number of samples of each trajectory, in the order of :attr:`ids`."""
         return self._bounds()[1]
 
+    def constant_variables(self, rtol: float = 1e-12) -> tuple[int, ...]:
+        """The variables that stay constant along every trajectory (to ``rtol`` times their
+        largest magnitude), such as a parameter recorded with each trajectory; none if every
+        variable is constant."""
+        starts, _ = self._bounds()
+        spread = np.maximum.reduceat(self.x, starts) - np.minimum.reduceat(self.x, starts)
+        size = np.max(np.abs(self.x), axis=0)
+        constant = np.all(spread <= rtol * size, axis=0)
+        return () if np.all(constant) else tuple(int(i) for i in np.flatnonzero(constant))
+
     def select(self, ids: Sequence[int]) -> "Trajectories":
         """The trajectories whose ids are in ``ids`` (in the order of their ids; ids that the data
         lack are ignored)."""

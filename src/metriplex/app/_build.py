@@ -6,6 +6,8 @@ strings are read in :mod:`metriplex.app.config`; this module turns checked setti
 
 from __future__ import annotations
 
+from typing import TextIO
+
 import jax
 import jax.random as jr
 
@@ -20,6 +22,7 @@ from .config import (
     LEARNED_POISSON,
     RunConfig,
     _feature_blocks,
+    _indices,
     _known_entropy,
     _known_friction,
     _known_poisson,
@@ -42,6 +45,7 @@ from ..losses import (
 from ..structure import _registry
 from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction
 from ..structure.lie_poisson import LiePoisson
+from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.potential import MLPPotential
 from ..train import Plateau
 
@@ -93,7 +97,38 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                        key=kM)
     else:
         friction = _known_friction(config, n)
+    constant = constant_variables(config, data)
+    if constant:
+        if config.poisson in LEARNED_POISSON:
+            poisson = MaskedPoisson(poisson, constant)
+        if config.friction == "neural":
+            friction = MaskedFriction(friction, constant)
     return GenericModel(energy, entropy, poisson, friction)
+
+
+def constant_variables(config: RunConfig, data: Trajectories, *,
+                       note: TextIO | None = None) -> tuple[int, ...]:
+    """The variables whose rows and columns the learned :math:`L` and :math:`M` keep zero
+    (``--constant``): by default (``auto``) those constant along every trajectory of ``data``
+    (:meth:`~metriplex.Trajectories.constant_variables`), which are then named on ``note``
+    (a text stream); ``none``; or the indices given."""
+    if config.constant == "auto":
+        constant = data.constant_variables()
+        if constant and note is not None:
+            print(_constant_note(constant, data.names), file=note)
+        return constant
+    if config.constant == "none":
+        return ()
+    return check_constant(_indices(config.constant, data.n, "--constant"), data.n)
+
+
+def _constant_note(constant: tuple[int, ...], names: tuple[str, ...]) -> str:
+    """What ``train`` says when it holds the variables ``constant`` by default."""
+    listed = ", ".join(f"{names[i]} (column {i})" for i in constant)
+    one = len(constant) == 1
+    return (f"note: {listed} {'is' if one else 'are'} constant along every training "
+            f"trajectory; the learned L and M hold {'it' if one else 'them'} constant "
+            f"(--constant none learns {'its rate' if one else 'their rates'}).")
 
 
 #: Learning-rate schedules by name: what ``--schedule`` means.

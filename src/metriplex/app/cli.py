@@ -65,6 +65,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--entropy", help=choices_help(ENTROPY_CHOICES))
     g.add_argument("--poisson", help=choices_help(POISSON_CHOICES))
     g.add_argument("--friction", help=choices_help(FRICTION_CHOICES))
+    g.add_argument("--constant", metavar="auto|none|I,J,...", help="variables that the learned "
+                   "L and M hold constant (zero rows and columns; E and S may still depend on "
+                   "them): auto (default) those constant along every training trajectory, such "
+                   "as a parameter recorded with the data | none | their indices")
     g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
                    "penalties otherwise) | soft (penalties only) | exact (L and M by "
                    "construction)")

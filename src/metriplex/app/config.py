@@ -36,6 +36,8 @@ from ._choices import (  # noqa: F401
     choices_help,
 )
 
+from ._presets import PRESETS
+
 # The command line's trajectory selection, importable from here as before.
 from ._selection import (  # noqa: F401
     IDS_SYNTAX,
@@ -97,6 +99,7 @@ class RunConfig:
     lbfgs_steps: int = 0
     input_noise: float = 0.0
     window_steps: int = 0
+    constant: str = "auto"
 
     def to_json(self) -> dict[str, Any]:
         """The settings as a JSON-able dict, one entry per field: :meth:`from_json` rebuilds
@@ -121,7 +124,7 @@ def _indices(text: str, n: int, option: str) -> tuple[int, ...]:
         idx = tuple(int(v) for v in text.split(",") if v.strip() != "")
     except ValueError:
         raise MetriplexError(
-            f"{option} expects comma-separated integer indices such as `sum:8,9`; got {text!r}."
+            f"{option} expects comma-separated integer indices (e.g. 8,9); got {text!r}."
         ) from None
     bad = [i for i in idx if not 0 <= i < n]
     if not idx or bad:
@@ -204,6 +207,8 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
     if _choice(config.friction, tuple(FRICTION_CHOICES), "--friction") == "file":
         _known_friction(config, n)
+    if config.constant not in ("auto", "none"):
+        _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
     _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
     _choice(config.jacobi, tuple(JACOBI_CHOICES), "--jacobi")
@@ -359,36 +364,6 @@ def _known_entropy(config: RunConfig, n: int):
     if config.entropy == "zero":
         return ZeroPotential()
     return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
-
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "rigid-body": dict(
-        energy="neural", entropy="zero", poisson="neural", friction="zero", jacobi="exact",
-        w_jacobi=1.0, width=64, depth=2, lr=1e-2, batch_size=256,
-    ),
-    "pendulum-energetic": dict(
-        energy="neural", entropy="sum:8,9", poisson="canonical:4", friction="neural",
-        features="pendulum", features_for="energy,friction", width=64, depth=2, lr=1e-2,
-        batch_size=256, degeneracy_at="midpoints",
-        scheme="discrete-gradient",
-    ),
-    "pendulum-temperature": dict(
-        energy="neural", entropy="neural", poisson="neural", friction="neural",
-        jacobi="stochastic", jacobi_probes=2, features="pendulum", width=64, depth=2, lr=1e-2,
-        batch_size=256, scheme="discrete-gradient", degeneracy_at="midpoints",
-    ),
-    # w_degeneracy_M = 1, not 10: early in training any M != 0 violates M grad E = 0 for the
-    # still-wrong E, and a strong penalty holds M near 0 while E is learned (gas, 10 000 steps,
-    # test error: weight 100 -> 0.34, 10 -> 0.085, 1 -> 0.043, 0.1 -> 0.013; 30 000 steps,
-    # weight 1 -> 0.012 with a 10x smaller degeneracy residual than weight 0.1).
-    # schedule "cosine": with the current units the fixed 30 000-step cosine schedule reaches
-    # test error 2.6e-2, the plateau schedule (evaluations every 600 steps) 3.5e-2 at the same
-    # cap (1.2e-2 was reached before losses were measured in the data's units).
-    "gas-containers": dict(
-        energy="neural", entropy="sum:2,3", poisson="canonical:1", friction="neural",
-        width=64, depth=2, lr=1e-2, batch_size=256, w_degeneracy_M=1.0, schedule="cosine",
-    ),
-}
 
 
 def preset(name: str, **overrides: Any) -> RunConfig:

@@ -26,7 +26,7 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from ._build import build_loss, build_model, stopping_for, units_for
+from ._build import build_loss, build_model, constant_variables, stopping_for, units_for
 from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import error_over_time, evaluate, rollout_data
@@ -184,6 +184,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
     model_key, fit_key = jr.split(jr.key(config.seed))
     units = units_for(config, train)
     model = build_model(config, train, key=model_key, units=units)
+    constant = constant_variables(config, train, note=sys.stderr)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     header = {
@@ -199,6 +200,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
         "data": data_info,
         "loss_terms": list(loss.names),
         "units": units.to_json(),
+        "constant_variables": list(constant),
     }
     write_json(out / "config.json", header)
     start = time.perf_counter()

@@ -13,6 +13,8 @@ from .poisson import CanonicalPoisson as CanonicalPoisson
 from .casimir import CasimirPoisson3 as CasimirPoisson3
 from .casimir import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .lie_poisson import LiePoisson as LiePoisson
+from .masked import MaskedFriction as MaskedFriction
+from .masked import MaskedPoisson as MaskedPoisson
 from .poisson import KnownPoisson as KnownPoisson
 from .poisson import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .poisson import SkewMLPPoisson as SkewMLPPoisson

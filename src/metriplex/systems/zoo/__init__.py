@@ -17,6 +17,7 @@ from . import (
     double_pendulum_friction,
     heat_exchange,
     oscillator_bath,
+    oscillator_family,
     relaxing_rigid_body,
     rlc_circuit,
     spinning_satellite,
@@ -38,5 +39,6 @@ ZOO: dict[str, ZooCase] = {
         relaxing_rigid_body,
         spinning_satellite,
         stiff_thermal_oscillator,
+        oscillator_family,
     )
 }
