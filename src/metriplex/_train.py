@@ -278,8 +278,8 @@ class TrainState:
 
 
 def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_rate: float,
-                    patience: int | None, lbfgs_steps: int, lbfgs_pairs: int,
-                    input_noise: float) -> None:
+                    patience: int | None, input_noise: float, checkpoint: Any,
+                    finish: Any) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
     if steps < 0 or batch_size < 1 or eval_every < 1:
         raise MetriplexError(
@@ -290,11 +290,16 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
         raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
     if patience is not None and patience < 1:
         raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
-    if lbfgs_steps < 0 or lbfgs_pairs < 1:
-        raise MetriplexError(
-            f"need lbfgs_steps >= 0 and lbfgs_pairs >= 1; got lbfgs_steps={lbfgs_steps}, "
-            f"lbfgs_pairs={lbfgs_pairs}."
-        )
+    from ._fit_options import Checkpoint, LBFGSFinish
+
+    for name, value, cls, example in (
+            ("checkpoint", checkpoint, Checkpoint, 'Checkpoint("run/checkpoint.ckpt")'),
+            ("finish", finish, LBFGSFinish, "LBFGSFinish(steps=1000)")):
+        if value is not None and not isinstance(value, cls):
+            raise MetriplexError(
+                f"fit's {name}= must be None or {cls.__name__}(...); got {type(value).__name__} "
+                f"{value!r}. Example: {name}={example}."
+            )
     if not 0 <= input_noise < 1:
         raise MetriplexError(
             f"input_noise must be in [0, 1) (a fraction of each variable's standard "

@@ -21,6 +21,7 @@ import optax
 from tqdm.auto import tqdm
 
 from ._errors import MetriplexError, TrainingDiverged
+from ._fit_options import Checkpoint, LBFGSFinish
 from ._interrupt import CtrlC
 from ._model import GenericModel, float_dtype, with_dtype
 from ._train import (
@@ -52,8 +53,8 @@ if TYPE_CHECKING:
     from jax.typing import DTypeLike
     from numpy.typing import ArrayLike
 
-__all__ = ["History", "Plateau", "RolloutCheck", "adjustable_optimizer", "default_optimizer",
-           "fit"]
+__all__ = ["Checkpoint", "History", "LBFGSFinish", "Plateau", "RolloutCheck",
+           "adjustable_optimizer", "default_optimizer", "fit"]
 
 
 def fit(
@@ -76,12 +77,9 @@ def fit(
     dtype: DTypeLike | None = None,
     progress: bool = True,
     seed_split: int = 0,
-    checkpoint: str | None = None,
-    checkpoint_every: int = 10,
-    resume: bool = False,
+    checkpoint: Checkpoint | None = None,
     data_parallel: bool = False,
-    lbfgs_steps: int = 0,
-    lbfgs_pairs: int = 8192,
+    finish: LBFGSFinish | None = None,
     input_noise: float = 0.0,
     key: jax.Array,
 ) -> tuple[GenericModel, History]:
@@ -130,10 +128,10 @@ def fit(
     ``dtype``: ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the
     model's.
 
-    ``checkpoint``: path of a checkpoint file, written atomically every ``checkpoint_every``
-    evaluations, on Ctrl-C and at the end: parameters, optimiser state, step, PRNG key, best
-    model and history. With ``resume=True`` training continues from it and reaches the same
-    result as an uninterrupted run with the same arguments.
+    ``checkpoint``: a :class:`Checkpoint` (path, how often, whether to resume from it): the
+    file is written atomically every ``checkpoint.every`` evaluations, on Ctrl-C and at the
+    end; with ``resume=True`` training continues from it and reaches the same result as an
+    uninterrupted run with the same arguments. ``None`` (default): no checkpoint.
 
     ``data_parallel``: split every minibatch over all local devices (``jax.devices()``) with JAX
     sharding: parameters are replicated, the batch axis is sharded, and XLA inserts the gradient
@@ -141,10 +139,8 @@ def fit(
     multiple of the device count. Across hosts, call ``jax.distributed.initialize()`` first (see
     docs/performance.md).
 
-    ``lbfgs_steps``: iterations of an L-BFGS finish (:func:`optax.lbfgs`) after the Adam stage,
-    on the loss of up to ``lbfgs_pairs`` fixed training pairs (evenly spread), evaluated every
-    ``eval_every`` iterations; its model is kept only where the validation score improves. 0
-    (default) for none.
+    ``finish``: an :class:`LBFGSFinish` (an L-BFGS stage after Adam, whose model is kept only
+    where the validation score improves), or ``None`` (default) for none.
 
     ``input_noise``: standard deviation of Gaussian noise added to both states of every training
     pair, as a fraction of each variable's standard deviation (default 0: none).
@@ -154,8 +150,9 @@ def fit(
     ```
     """
     check_arguments(steps=steps, batch_size=batch_size, eval_every=eval_every,
-                    learning_rate=learning_rate, patience=patience, lbfgs_steps=lbfgs_steps,
-                    lbfgs_pairs=lbfgs_pairs, input_noise=input_noise)
+                    learning_rate=learning_rate, patience=patience, input_noise=input_noise,
+                    checkpoint=checkpoint, finish=finish)
+    lbfgs_steps = 0 if finish is None else finish.steps
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
@@ -211,10 +208,9 @@ def fit(
 
     key, eval_key = jr.split(key)
     state = TrainState.start(params, opt_state, key, learning_rate)
+    resume = checkpoint is not None and checkpoint.resume
     if resume:
-        if checkpoint is None:
-            raise MetriplexError("resume=True needs the `checkpoint` path to resume from.")
-        state = state.load(checkpoint)
+        state = state.load(checkpoint.path)
         if state.history.stopped.startswith("interrupted"):
             state.history.stopped = ""
         if state.done > steps:
@@ -226,7 +222,7 @@ def fit(
 
     def save_checkpoint():
         if checkpoint is not None:
-            state.save(checkpoint)
+            state.save(checkpoint.path)
 
     # The last fifth of the step budget anneals the rate (cosine to 1%), so a run that the
     # budget ends before it converges still finishes on a small learning rate.
@@ -334,7 +330,7 @@ def fit(
         nonlocal bar
         solver, chunk = make_lbfgs_chunk(loss, static)
         chunk = eqx.filter_jit(chunk)
-        pairs = full_train.take(jnp.asarray(spread(n_train, lbfgs_pairs)), loss.window_shape)
+        pairs = full_train.take(jnp.asarray(spread(n_train, finish.pairs)), loss.window_shape)
         state.params = state.best_params
         opt_state = solver.init(state.params)
         bar = tqdm(total=lbfgs_steps, disable=not progress, desc="L-BFGS", unit="it",
@@ -378,7 +374,7 @@ def fit(
                 ctrl_c.check()
                 record_evaluation()
                 evaluations += 1
-                if evaluations % max(checkpoint_every, 1) == 0:
+                if checkpoint is not None and evaluations % checkpoint.every == 0:
                     save_checkpoint()
                 ctrl_c.check()
                 if should_stop():

@@ -31,7 +31,7 @@ from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import error_over_time, evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
-from ..train import fit
+from ..train import Checkpoint, LBFGSFinish, fit
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -220,11 +220,10 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             scale=units.rate,
             dtype=dtype,
             progress=progress,
-            checkpoint=str(out / "checkpoint.ckpt"),
-            checkpoint_every=config.checkpoint_every,
-            resume=resume,
+            checkpoint=Checkpoint(out / "checkpoint.ckpt", every=config.checkpoint_every,
+                                  resume=resume),
             data_parallel=config.data_parallel,
-            lbfgs_steps=config.lbfgs_steps,
+            finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
             input_noise=config.input_noise,
             key=fit_key,
         )
