@@ -115,10 +115,13 @@ def test_failed_step_is_reported_not_silent_nan(scheme):
     np.testing.assert_allclose(xs[1, :, 0], exact, rtol=1e-3)
 
 
-def test_simulate_raises_with_partial_states():
+@pytest.mark.parametrize("run", [lambda x0: simulate(BLOW_UP, x0, TS_BLOW_UP),
+                                 lambda x0: solve(BLOW_UP, x0, TS_BLOW_UP, throw=True)],
+                         ids=["simulate", "solve-throw"])
+def test_simulate_raises_with_partial_states(run):
     x0 = jnp.array([[0.01], [0.1]])
     with pytest.raises(mx.RolloutFailure, match=r"from t=1 to t=8 of trajectory 1 did not") as err:
-        simulate(BLOW_UP, x0, TS_BLOW_UP)
+        run(x0)
     assert err.value.trajectory == 1
     assert err.value.time == 8.0
     partial = np.asarray(err.value.partial)

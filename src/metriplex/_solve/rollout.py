@@ -161,13 +161,27 @@ def solve(
     ts: Float[Array, "*batch T"],
     *,
     scheme: AbstractScheme | None = None,
+    throw: bool = False,
 ) -> Rollout:
-    """Roll out ``model`` from ``x0`` on the time grid ``ts``; never raises on a failed step.
+    """Roll out ``model`` from ``x0`` on the time grid ``ts``.
 
     ``x0`` of shape ``(n,)`` or ``(batch, n)``; ``ts`` of shape ``(T,)`` (shared) or
     ``(batch, T)`` (one grid per trajectory, e.g. non-uniform or padded with repeated times:
     a zero step keeps the state).
+
+    A step that does not converge is marked, not raised: the :class:`Rollout` holds a result
+    code per trajectory (``failed_step``, -1 where it completed) and NaN from that step on.
+    With ``throw=True`` (as in Diffrax) the first failure raises
+    :class:`~metriplex.RolloutFailure` instead, naming the trajectory and the time, with the
+    states computed up to there in ``.partial``.
     """
+    out = _solve(model, x0, ts, scheme)
+    if throw:
+        _raise_first_failure(out, scheme)
+    return out
+
+
+def _solve(model, x0, ts, scheme) -> Rollout:
     scheme = CrankNicolson() if scheme is None else scheme
     x0 = jnp.asarray(x0)
     ts = jnp.asarray(ts, dtype=x0.dtype)
@@ -197,15 +211,21 @@ def simulate(
 ) -> Float[Array, "*batch T n"]:
     """Simulate ``model`` from ``x0`` on ``ts``; shape ``(T, n)`` or ``(batch, T, n)``.
 
-    Implicit Crank–Nicolson by default. If a step does not converge this raises
-    :class:`~metriplex.RolloutFailure` naming the trajectory and time, with the states computed
-    up to there in ``.partial``; use :func:`solve` to get the marked result without raising.
+    Implicit Crank–Nicolson by default. The states of ``solve(..., throw=True)``: if a step
+    does not converge this raises :class:`~metriplex.RolloutFailure` naming the trajectory and
+    time, with the states computed up to there in ``.partial``; use :func:`solve` to get the
+    marked result without raising.
 
     ```python
     xs = mx.simulate(model, x0, jnp.linspace(0.0, 10.0, 101))
     ```
     """
-    out = solve(model, x0, ts, scheme=scheme)
+    return solve(model, x0, ts, scheme=scheme, throw=True).xs
+
+
+def _raise_first_failure(out: Rollout, scheme: AbstractScheme | None) -> None:
+    """Raise :class:`~metriplex.RolloutFailure` for the first trajectory of ``out`` whose
+    rollout failed (nothing if all completed)."""
     failed = np.atleast_1d(np.asarray(out.failed_step))
     if np.any(failed >= 0):
         b = int(np.argmax(failed >= 0))
@@ -220,4 +240,3 @@ def simulate(
             trajectory=b,
             time=float(ts_b[k]),
         )
-    return out.xs
