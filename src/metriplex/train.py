@@ -58,7 +58,7 @@ def fit(
     optimizer: optax.GradientTransformation | None = None,
     learning_rate: float = 1e-2,
     weight_decay: float = 0.0,
-    steps: int = 30_000,
+    steps: int = 100_000,
     batch_size: int = 256,
     validation: float | Trajectories | None = 0.2,
     eval_every: int = 100,
@@ -96,7 +96,8 @@ def fit(
 
     ``weight_decay``: decoupled weight decay (AdamW) of the default optimiser (default 0).
 
-    ``steps``: the most optimiser steps (default 30 000).
+    ``steps``: the most optimiser steps (default 100 000; a cap: training usually stops
+    earlier, when the plateau schedule has converged).
 
     ``validation``: fraction of trajectories held out (default 0.2; split **by trajectory**),
     explicit validation ``Trajectories``, or ``None``/``0`` for none. The returned model is the

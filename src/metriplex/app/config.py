@@ -84,7 +84,7 @@ class RunConfig:
     activation: str = "softplus"
     lr: float = 1e-2
     weight_decay: float = 0.0
-    steps: int = 30_000
+    steps: int = 100_000
     batch_size: int = 256
     validation: float = 0.2
     eval_every: int = 100
