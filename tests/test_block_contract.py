@@ -3,6 +3,7 @@
 import inspect
 from typing import ClassVar
 
+import jax
 import jax.numpy as jnp
 import pytest
 
@@ -52,3 +53,20 @@ def test_no_concrete_block_subclasses_another_concrete_block():
     for block in blocks:
         parents = [b for b in block.__mro__[1:] if b in blocks]
         assert not parents, f"{block.__name__} subclasses {parents[0].__name__}"
+
+
+def test_models_share_one_abstract_base():
+    import metriplex as mx
+    from metriplex._reference import BlackBoxModel
+
+    assert issubclass(mx.GenericModel, mx.AbstractModel)
+    assert issubclass(BlackBoxModel, mx.AbstractModel)
+
+    class Partial(mx.AbstractModel):
+        def terms(self, x):
+            raise NotImplementedError
+
+    with pytest.raises(TypeError, match="abstract"):
+        Partial()
+    box = BlackBoxModel(3, width=4, data=jnp.ones((4, 3)), key=jax.random.key(0))
+    assert box.size() == 3 and mx.integrate.model_size(box) == 3

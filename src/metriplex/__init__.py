@@ -11,6 +11,7 @@ from . import systems as systems
 from ._errors import MetriplexError as MetriplexError
 from ._errors import RolloutFailure as RolloutFailure
 from ._errors import TrainingDiverged as TrainingDiverged
+from ._model import AbstractModel as AbstractModel
 from ._model import GenericModel as GenericModel
 from ._model import Terms as Terms
 from .data import Pairs as Pairs

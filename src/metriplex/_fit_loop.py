@@ -37,7 +37,7 @@ if TYPE_CHECKING:
 
     from ._fit_options import Checkpoint, LBFGSFinish
     from ._loss_base import Batch, Loss
-    from ._model import GenericModel
+    from ._model import AbstractModel
     from ._pairs import PairStore
     from ._validate import Plateau
     from .integrate import AbstractScheme
@@ -250,7 +250,7 @@ class FitLoop:
             self.bar.close()
             history.lbfgs_steps = done
 
-    def run(self, *, resume: bool) -> tuple[GenericModel, History]:
+    def run(self, *, resume: bool) -> tuple[AbstractModel, History]:
         """Train until a budget or the stopping rule ends it (or Ctrl-C), finish with L-BFGS if
         asked, save the checkpoint; return the best model and the history."""
         state, history = self.state, self.history

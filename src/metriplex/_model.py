@@ -2,6 +2,7 @@ r"""The GENERIC model :math:`\dot x = L(x)\nabla E(x) + M(x)\nabla S(x)`."""
 
 from __future__ import annotations
 
+import abc
 from typing import TYPE_CHECKING, Any, NamedTuple, TypeVar
 
 import equinox as eqx
@@ -47,7 +48,30 @@ class Terms(NamedTuple):
         return self.reversible + self.irreversible
 
 
-class GenericModel(eqx.Module):
+class AbstractModel(eqx.Module):
+    """What :func:`~metriplex.fit`, the schemes and the diagnostics use of a model: its
+    :class:`Terms` at a state, its vector field and bracket, and how many variables it has.
+    :class:`GenericModel` is the GENERIC one; the verdict's black-box reference is another."""
+
+    @abc.abstractmethod
+    def terms(self, x: State) -> Terms:
+        """Everything the losses evaluate at the state ``x``."""
+
+    @abc.abstractmethod
+    def vector_field(self, x: State) -> State:
+        """The time derivative at the state ``x``."""
+
+    @abc.abstractmethod
+    def poisson_matrix(self, x: State) -> Matrix:
+        """The bivector :math:`L(x)` whose Jacobi identity the diagnostics check."""
+
+    @abc.abstractmethod
+    def size(self) -> int | None:
+        """The number of state variables, ``None`` where the model cannot tell (a model of
+        known functions only)."""
+
+
+class GenericModel(AbstractModel):
     r"""A GENERIC system built from four blocks, each learned or given.
 
     .. math:: \dot x = L(x)\,\nabla E(x) + M(x)\,\nabla S(x)
@@ -85,6 +109,15 @@ class GenericModel(eqx.Module):
     def __call__(self, x: State) -> State:
         """The vector field at ``x`` (:meth:`vector_field`)."""
         return self.vector_field(x)
+
+    def size(self) -> int | None:
+        """The number of state variables, from the first block that states it (``None`` where
+        none does, e.g. a model of known functions only)."""
+        for block in (self.poisson, self.friction, self.energy):
+            n = getattr(block, "n", None)
+            if isinstance(n, int):
+                return n
+        return None
 
     def poisson_matrix(self, x: State) -> Matrix:
         """The Poisson bivector :math:`L(x)`, its block called with the entropy's gradient."""

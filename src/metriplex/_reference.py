@@ -16,7 +16,7 @@ import jax.random as jr
 import numpy as np
 
 from ._errors import TrainingDiverged
-from ._model import Terms, with_dtype
+from ._model import AbstractModel, Terms, with_dtype
 from ._types import Matrix, State
 from .data import Trajectories, state_scale, time_scale
 from .losses import CrankNicolsonResidual
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
-class BlackBoxModel(eqx.Module):
+class BlackBoxModel(AbstractModel):
     r"""An unconstrained vector field :math:`\dot x = f_\theta(x)` (an MLP), trainable with
     :func:`metriplex.fit` and the same pair losses. It is not GENERIC: it measures the residual
     floor of the data.
@@ -75,6 +75,10 @@ class BlackBoxModel(eqx.Module):
     def poisson_matrix(self, x: State) -> Matrix:
         """The zero matrix: the black box has no bracket to check."""
         return jnp.zeros((self.n, self.n), x.dtype)
+
+    def size(self) -> int:
+        """The number of state variables."""
+        return self.n
 
 
 def _residuals(model, pairs, rate, dtype) -> np.ndarray:

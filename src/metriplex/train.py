@@ -20,7 +20,7 @@ import optax
 from ._errors import MetriplexError
 from ._fit_loop import Evaluation, FitLoop
 from ._fit_options import Checkpoint, LBFGSFinish
-from ._model import GenericModel, float_dtype, with_dtype
+from ._model import AbstractModel, float_dtype, with_dtype
 from ._train import (
     History,
     TrainState,
@@ -51,7 +51,7 @@ __all__ = ["Checkpoint", "History", "LBFGSFinish", "Plateau", "RolloutCheck",
 
 
 def fit(
-    model: GenericModel,
+    model: AbstractModel,
     data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],
     *,
     loss: Loss | None = None,
@@ -75,7 +75,7 @@ def fit(
     finish: LBFGSFinish | None = None,
     input_noise: float = 0.0,
     key: jax.Array,
-) -> tuple[GenericModel, History]:
+) -> tuple[AbstractModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
 
     By default training runs until the validation score stops improving: Adam with a short
@@ -149,7 +149,7 @@ def fit(
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
-    n = getattr(model, "n", None) or model_size(model)
+    n = model_size(model)
     dtype = float_dtype(model, default=jnp.float32) if dtype is None else dtype
     train_data, valid_data = split_validation(data, validation, seed_split)
     # The pairs are rows of the states (no copy of them), checked once.

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import MetriplexError, RolloutFailure
-from .._model import GenericModel
+from .._model import AbstractModel
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
 from ._implicit import _Implicit
@@ -145,18 +145,14 @@ def _check_inputs(x0, ts, n):
         )
 
 
-def model_size(model: GenericModel) -> int | None:
-    """The number of state variables of ``model``, from the first of its blocks that states it
-    (``None`` where none does, e.g. a model of known functions only)."""
-    for block in (model.poisson, model.friction, model.energy):
-        n = getattr(block, "n", None)
-        if isinstance(n, int):
-            return n
-    return None
+def model_size(model: AbstractModel) -> int | None:
+    """The number of state variables of ``model`` (:meth:`AbstractModel.size`; ``None`` where
+    the model cannot tell, e.g. a model of known functions only)."""
+    return model.size()
 
 
 def solve(
-    model: GenericModel,
+    model: AbstractModel,
     x0: Float[Array, "*batch n"],
     ts: Float[Array, "*batch T"],
     *,
@@ -203,7 +199,7 @@ def _solve(model, x0, ts, scheme) -> Rollout:
 
 
 def simulate(
-    model: GenericModel,
+    model: AbstractModel,
     x0: Float[Array, "*batch n"],
     ts: Float[Array, "*batch T"],
     *,
