@@ -60,9 +60,10 @@ def _coerce(value: str):
     return None if value == "none" else value
 
 
-def standardised_error(model, data, scheme) -> tuple[float, list[float]]:
-    """Mean over trajectories of ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``."""
-    out, xs, lengths = rollout_data(model, data, scheme=scheme)
+def standardised_error(model, data, scheme, rollout=None) -> tuple[float, list[float]]:
+    """Mean over trajectories of ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``; ``rollout``:
+    the ``rollout_data`` of ``model`` on ``data`` if already computed."""
+    out, xs, lengths = rollout_data(model, data, scheme=scheme) if rollout is None else rollout
     pred = np.asarray(out.xs, np.float64)
     mean = data.x.mean(axis=0)
     d = data.x.std(axis=0)
@@ -79,11 +80,11 @@ def standardised_error(model, data, scheme) -> tuple[float, list[float]]:
     return float(np.mean(errs)), errs
 
 
-def constant_drift(model, data, scheme) -> float | None:
-    """The largest change, over the test rollouts, of a variable that is constant along every
-    test trajectory, in standard deviations of that variable over the test data (``None`` when
-    no variable is constant)."""
-    out, xs, lengths = rollout_data(model, data, scheme=scheme)
+def constant_drift(data, rollout) -> float | None:
+    """The largest change, over the test rollouts (``rollout_data``'s result), of a variable
+    that is constant along every test trajectory, in standard deviations of that variable over
+    the test data (``None`` when no variable is constant)."""
+    out, xs, lengths = rollout
     xs = np.asarray(xs, np.float64)
     constant = [i for i in range(xs.shape[2])
                 if all(np.ptp(xs[k, :T, i]) == 0.0 for k, T in enumerate(lengths))]
@@ -113,8 +114,9 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
                                               progress=False)
     scheme = scheme_from_name(config.scheme)
     report = evaluate(model, test, scheme=scheme)
-    std_mean, _ = standardised_error(model, test, scheme)
-    drift = constant_drift(model, test, scheme)
+    rollout = rollout_data(model, test, scheme=scheme)
+    std_mean, _ = standardised_error(model, test, scheme, rollout)
+    drift = constant_drift(test, rollout)
     truth = evaluate(system.model, test, scheme=scheme_from_name("cn"))
     flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in case.flags.items()) or "(none)"
     return {

@@ -25,6 +25,7 @@ import optax
 
 from . import _checkpoint
 from ._errors import MetriplexError
+from ._fit_options import Checkpoint, LBFGSFinish
 from .data import Pairs, Trajectories, state_scale, time_scale
 from .losses import Batch, Loss
 
@@ -290,8 +291,6 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
         raise MetriplexError(f"the learning rate must be > 0; got {learning_rate}.")
     if patience is not None and patience < 1:
         raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
-    from ._fit_options import Checkpoint, LBFGSFinish
-
     for name, value, cls, example in (
             ("checkpoint", checkpoint, Checkpoint, 'Checkpoint("run/checkpoint.ckpt")'),
             ("finish", finish, LBFGSFinish, "LBFGSFinish(steps=1000)")):

@@ -58,10 +58,13 @@ def units_for(config: RunConfig, data: Trajectories) -> Units:
 
 
 def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
-                units: Units | None = None) -> GenericModel:
+                units: Units | None = None,
+                constant: tuple[int, ...] | None = None) -> GenericModel:
     """The untrained model that ``config`` describes, in the natural ``units`` of ``data``
     (default :func:`units_for`): networks see standardised states, and their outputs are scaled
-    so that an untrained network gives rates of the data's order, whatever the units."""
+    so that an untrained network gives rates of the data's order, whatever the units. The
+    learned L and M hold the variables ``constant`` constant (default
+    :func:`constant_variables`)."""
     n = data.n
     validate(config, n)
     units = units_for(config, data) if units is None else units
@@ -97,7 +100,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                        key=kM)
     else:
         friction = _known_friction(config, n)
-    constant = constant_variables(config, data)
+    constant = constant_variables(config, data) if constant is None else constant
     if constant:
         if config.poisson in LEARNED_POISSON:
             poisson = MaskedPoisson(poisson, constant)

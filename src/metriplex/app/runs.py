@@ -183,8 +183,8 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
         _check_resume(run_config(out), data_info, train, valid)
     model_key, fit_key = jr.split(jr.key(config.seed))
     units = units_for(config, train)
-    model = build_model(config, train, key=model_key, units=units)
     constant = constant_variables(config, train, note=sys.stderr)
+    model = build_model(config, train, key=model_key, units=units, constant=constant)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     header = {
