@@ -285,3 +285,24 @@ def test_trained_model_rolls_out_with_its_energy_conserved(damped_rollouts):
     assert np.max(np.abs(E - E[:, :1]) / np.abs(E[:, :1])) <= 1e-9
     S = np.asarray(out.xs[..., 2])
     assert np.min(np.diff(S, axis=1)) >= -1e-15
+
+
+def test_float32_steps_are_not_failed_for_the_rounding_of_a_large_energy():
+    """In float32 the discrete gradient's (E1 - E0)/|x1 - x0| carries rounding of about
+    eps |E| / |x1 - x0|: for an energy with a large offset Newton's updates stall above 1e-5.
+    The float32 tolerance, 1e-4, accepts those steps (Newton converges quadratically, so the
+    state is far more accurate than its last update); the former 1e-5 failed most of them."""
+    from metriplex.integrate import FixedPointThenNewton
+
+    energy = mx.Known(lambda x: 0.5 * x[1] ** 2 + 0.25 * x[0] ** 4 - jnp.cos(x[0]) + 1e5)
+    model = mx.GenericModel(energy, mx.ZeroPotential(), mx.CanonicalPoisson(2, 1),
+                            mx.ZeroFriction(2))
+    x0 = jnp.asarray(np.random.default_rng(0).normal(size=(64, 2)), jnp.float32)
+    ts = jnp.asarray(np.arange(200) * 0.005, jnp.float32)
+
+    def failed(root_finder):
+        out = solve(model, x0, ts, scheme=DiscreteGradient(root_finder=root_finder))
+        return int(np.sum(np.asarray(out.failed_step) >= 0))
+
+    assert failed(FixedPointThenNewton()) <= 2
+    assert failed(FixedPointThenNewton(rtol=1e-5, atol=1e-5)) >= 20
