@@ -108,6 +108,13 @@ def test_masks_that_cannot_be_are_refused(constant, match):
         MaskedPoisson(SkewMLPPoisson(4, width=8, key=jr.key(0)), constant)
 
 
+def test_a_block_without_a_size_cannot_be_masked():
+    known = mx.KnownFriction(lambda x: jnp.zeros((x.shape[0], x.shape[0]), x.dtype))
+    with pytest.raises(mx.MetriplexError, match=r"MaskedFriction wraps a block that states its "
+                       r"size n .*KnownFriction does not\. Wrap the learned block"):
+        MaskedFriction(known, (0,))
+
+
 def _cli(*args):
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):

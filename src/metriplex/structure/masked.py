@@ -43,13 +43,19 @@ def check_constant(constant: Sequence[Any], n: int) -> tuple[int, ...]:
 class _AbstractMasked(eqx.Module):
     """A wrapped block (``base``) whose matrix has zero rows and columns at ``constant``."""
 
-    family: ClassVar[str]
     base: Any
     constant: tuple[int, ...] = eqx.field(static=True)
     n: int = eqx.field(static=True)
 
     def __init__(self, base: Any, constant: Sequence[int]) -> None:
-        n = base.n
+        n = getattr(base, "n", None)
+        if not isinstance(n, int):
+            raise MetriplexError(
+                f"{type(self).__name__} wraps a block that states its size n (a learned or "
+                f"constant block); {type(base).__name__} does not. Wrap the learned block, or "
+                "give the known matrix with the rows and columns of the constant variables "
+                "already zero."
+            )
         self.base = base
         self.constant = check_constant(constant, n)
         self.n = n
@@ -72,7 +78,8 @@ class _AbstractMasked(eqx.Module):
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:
         """The masked block of the saved spec: its wrapped block rebuilt from ``spec["base"]``."""
-        return cls(from_spec(cls.family, spec["base"], n, key=key), spec["constant"])
+        family = "poisson" if issubclass(cls, AbstractPoisson) else "friction"
+        return cls(from_spec(family, spec["base"], n, key=key), spec["constant"])
 
 
 @register("poisson", "masked")
@@ -85,7 +92,6 @@ class MaskedPoisson(_AbstractMasked, AbstractPoisson):
     ```
     """
 
-    family: ClassVar[str] = "poisson"
     # The wrapped block may read the gradient (an exactly degenerate one), so a matrix
     # computed with another gradient is never reused.
     uses_gradient: ClassVar[bool] = True
@@ -101,7 +107,6 @@ class MaskedFriction(_AbstractMasked, AbstractFriction):
     ```
     """
 
-    family: ClassVar[str] = "friction"
     # The wrapped block may read the gradient (an exactly degenerate one), so a matrix
     # computed with another gradient is never reused.
     uses_gradient: ClassVar[bool] = True
