@@ -10,9 +10,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow
 def test_benchmark_suite_quick(tmp_path):
     # The suite's own settings: its thread pinning, optimised programs, and no compilation cache
     # (it times compiling).

@@ -7,6 +7,7 @@ from metriplex._errors import MetriplexError
 from metriplex.config import RunConfig, validate
 
 
+@pytest.mark.slow
 def test_lbfgs_finish_lowers_the_loss_and_keeps_the_better_model(cosine_lbfgs_run):
     # The session's run (tests/conftest.py): 300 cosine-schedule Adam steps, evaluated every
     # 50, then lbfgs_steps=100; its Adam stage is also test_schedule's cosine run.

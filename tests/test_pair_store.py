@@ -80,6 +80,7 @@ def _fit(data, **kwargs):
                   progress=False, key=jr.key(2), **kwargs)
 
 
+@pytest.mark.slow
 def test_input_noise_perturbs_training_reproducibly(data):
     _, plain = _fit(data)
     _, noisy = _fit(data, input_noise=0.05)

@@ -5,6 +5,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 import metriplex as mx
 from helpers import damped_oscillator, make_data, oscillator_x0
 
@@ -46,6 +48,7 @@ SCRIPT = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_two_cpu_devices_match_one(tmp_path):
     mx.write(tmp_path / "d.npz", make_data(damped_oscillator(), oscillator_x0(6), 0.1, 30))
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2",

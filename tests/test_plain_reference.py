@@ -25,6 +25,7 @@ def _script():
 
 
 # fully-learned+jacobi holds every learned block of fully-learned plus the Jacobi term.
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["fully-learned+jacobi", "pendulum-energetic"])
 def test_plain_loss_is_metriplex_loss(tmp_path, name):
     from metriplex.io import write

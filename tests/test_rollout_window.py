@@ -64,6 +64,7 @@ def test_the_true_model_rolls_out_its_own_data_exactly_and_other_data_not():
     assert float(value(batch._replace(window=shifted))) > 1e-6
 
 
+@pytest.mark.slow
 def test_fit_trains_with_windows_and_validation_judges_the_pair_loss():
     data = make_data(damped_oscillator(0.3), oscillator_x0(8), 0.1, 20)
     model = mx.GenericModel(

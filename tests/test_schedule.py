@@ -23,6 +23,7 @@ def test_an_unknown_schedule_is_refused_with_the_choices():
         validate(RunConfig(schedule="step"), 3)
 
 
+@pytest.mark.slow
 def test_cosine_runs_the_whole_budget(cosine_lbfgs_run):
     # The session's cosine-schedule run (tests/conftest.py; it has test_lbfgs's L-BFGS finish
     # after the Adam stage, which is what is checked here). The cosine schedule never stops
