@@ -224,6 +224,7 @@ def _spnn_pendulum():
     return pend.model, jnp.asarray(pend.sample_initial(2, seed=0))
 
 
+@pytest.mark.slow
 def test_spnn_pendulum_energy_at_the_published_dt():
     model, x0 = _spnn_pendulum()
     ts = jnp.arange(200.0) * 0.3  # the published 200 snapshots at dt = 0.3

@@ -52,6 +52,7 @@ def test_ready_pairs_give_windows_of_one_step():
     np.testing.assert_array_equal(window.targets[:, 0], x1)
 
 
+@pytest.mark.slow
 def test_the_true_model_rolls_out_its_own_data_exactly_and_other_data_not():
     true = damped_oscillator(0.3)
     data = make_data(true, oscillator_x0(4), 0.1, 20)
