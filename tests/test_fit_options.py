@@ -11,12 +11,29 @@ import metriplex as mx
 @pytest.mark.parametrize("make, match", [
     (lambda: mx.Checkpoint("c.ckpt", every=0), r"integer >= 1; got 0\. Example: Checkpoint"),
     (lambda: mx.Checkpoint("c.ckpt", every=2.5), r"integer >= 1; got 2\.5"),
-    (lambda: mx.LBFGSFinish(steps=-1), r"steps >= 0 and pairs >= 1 .*got steps=-1, pairs=8192"),
-    (lambda: mx.LBFGSFinish(pairs=0), r"got steps=1000, pairs=0"),
+    (lambda: mx.LBFGSFinish(steps=-1),
+     r"LBFGSFinish's steps must be an integer >= 0; got -1\. Example: LBFGSFinish"),
+    (lambda: mx.LBFGSFinish(steps=True), r"LBFGSFinish's steps must be an integer >= 0; got True"),
+    (lambda: mx.LBFGSFinish(pairs=0), r"LBFGSFinish's pairs must be an integer >= 1; got 0\."),
 ])
 def test_options_out_of_range_are_refused(make, match):
     with pytest.raises(mx.MetriplexError, match=match):
         make()
+
+
+def test_every_count_takes_numpy_integers_alike():
+    # One check (metriplex._errors.expect_integer) for every count an option takes: a NumPy
+    # integer, as from np.arange or a config read with NumPy, is an integer everywhere.
+    three = np.int64(3)
+    counts = (mx.LBFGSFinish(steps=three, pairs=three).pairs,
+              mx.Checkpoint("c.ckpt", every=three).every,
+              mx.StochasticJacobi(probes=three).probes,
+              mx.RolloutWindow(steps=three, windows=three).windows)
+    assert all(type(c) is int and c == 3 for c in counts), counts  # kept as Python ints
+    for make in (lambda: mx.StochasticJacobi(probes=np.float64(3.0)),
+                 lambda: mx.RolloutWindow(steps=3.0)):
+        with pytest.raises(mx.MetriplexError, match=r"must be an integer >= 1; got"):
+            make()
 
 
 @pytest.mark.parametrize("option, value, match", [

@@ -54,8 +54,9 @@ def test_loss_composition_and_weights():
                        r"ExactJacobi\(\) .* or StochasticJacobi\(probes=K\) .*; got "
                        r"'stochastic'\. Write JacobiPenalty\(ExactJacobi\(\)\)"):
         mx.JacobiPenalty("stochastic")
-    with pytest.raises(mx.MetriplexError, match=r"StochasticJacobi needs probes >= 1 .*; got "
-                                                r"probes=0\."):
+    with pytest.raises(mx.MetriplexError, match=r"StochasticJacobi's probes \(random probe "
+                                                r"triples per sample\) must be an integer >= 1; "
+                                                r"got 0\."):
         mx.StochasticJacobi(probes=0)
 
 

@@ -296,12 +296,12 @@ def test_generate_api():
     direct = mx.simulate(GasContainers().model, jnp.asarray(x0), jnp.arange(6.0) * 0.02)
     np.testing.assert_allclose(cn.x.reshape(2, 6, 4), direct, rtol=1e-12, atol=1e-12)
     for bad, match in (
-        (dict(steps=0), "`steps` must be a positive integer; got 0"),
+        (dict(steps=0), "`steps` must be an integer >= 1; got 0"),
         (dict(dt=-0.1), "`dt` must be a positive finite number; got -0.1"),
-        (dict(substeps=0), "`substeps` must be a positive integer; got 0"),
+        (dict(substeps=0), "`substeps` must be an integer >= 1; got 0"),
         (dict(x0=np.zeros((2, 3))), r"x0 must have shape \(trajectories, 4\)"),
         (dict(x0=np.ones((3, 4))), "got trajectories=2 but 3 initial states in x0"),
-        (dict(steps=2.5), "`steps` must be a positive integer; got 2.5"),
+        (dict(steps=2.5), "`steps` must be an integer >= 1; got 2.5"),
     ):
         with pytest.raises(mx.MetriplexError, match=match):
             generate("gas-containers", trajectories=2, **{"steps": 5, "dt": 0.02, **bad})
@@ -362,5 +362,5 @@ def test_sampling():
     g = get_system("gas-containers").sample_initial(200, seed=0)
     lo = np.array([0.2, -1.0, 1.0, 1.0])
     assert np.all(g >= lo[None, :]) and np.all(g <= np.array([1.8, 1.0, 3.0, 3.0])[None, :])
-    with pytest.raises(mx.MetriplexError, match="positive integer; got 0"):
+    with pytest.raises(mx.MetriplexError, match="must be an integer >= 1; got 0"):
         rb.sample_initial(0, seed=0)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import numbers
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -31,6 +34,26 @@ class TrainingDiverged(MetriplexError):
         super().__init__(message)
         self.model = model
         self.history = history
+
+
+def expect_integer(value: Any, *, what: str, least: int, fix: str = "") -> int:
+    """``value`` as an ``int``, or a :class:`MetriplexError` unless it is an integer (Python's
+    or NumPy's; not a bool, not a float such as 2.0) of at least ``least``.
+
+    The one check of the counts that options take (steps, probes, pairs); the message says
+    the rule, the value received and, when given, the ``fix``.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
+        raise MetriplexError(
+            f"{what} must be an integer >= {least}; got {value!r}." + (f" {fix}" if fix else "")
+        )
+    return int(value)
+
+
+def count_of(what: str, *, least: int) -> Callable[[Any], int]:
+    """:func:`expect_integer` as a field converter (``eqx.field(converter=...)``): a static
+    field then holds a Python ``int`` whatever integer it was given."""
+    return functools.partial(expect_integer, what=what, least=least)
 
 
 def expect_instance(value: Any, kind: type, *, what: str, expected: str, fix: str = "") -> None:

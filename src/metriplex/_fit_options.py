@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from ._errors import MetriplexError
+from ._errors import expect_integer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -31,11 +31,9 @@ class Checkpoint:
     resume: bool = False
 
     def __post_init__(self):
-        if isinstance(self.every, bool) or not isinstance(self.every, int) or self.every < 1:
-            raise MetriplexError(
-                f"Checkpoint(every=...) counts evaluations between checkpoints and must be an "
-                f"integer >= 1; got {self.every!r}. Example: Checkpoint(path, every=10)."
-            )
+        object.__setattr__(self, "every", expect_integer(
+            self.every, least=1, what="Checkpoint's every (evaluations between checkpoints)",
+            fix="Example: Checkpoint(path, every=10)."))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,11 +53,8 @@ class LBFGSFinish:
     pairs: int = 8192
 
     def __post_init__(self):
-        for name, least in (("steps", 0), ("pairs", 1)):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < least:
-                raise MetriplexError(
-                    f"LBFGSFinish needs steps >= 0 and pairs >= 1 (integers); got "
-                    f"steps={self.steps!r}, pairs={self.pairs!r}. Example: "
-                    "LBFGSFinish(steps=1000)."
-                )
+        example = "Example: LBFGSFinish(steps=1000)."
+        object.__setattr__(self, "steps", expect_integer(
+            self.steps, what="LBFGSFinish's steps", least=0, fix=example))
+        object.__setattr__(self, "pairs", expect_integer(
+            self.pairs, what="LBFGSFinish's pairs", least=1, fix=example))

@@ -9,14 +9,13 @@ compound are the ones trained away.
 
 from __future__ import annotations
 
-import numbers
 from typing import ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._errors import MetriplexError, expect_instance
+from ._errors import count_of, expect_instance
 from ._model import GenericModel
 from .integrate import AbstractScheme, CrankNicolson
 from ._loss_base import AbstractLossTerm, Batch, Context
@@ -52,19 +51,15 @@ class RolloutWindow(AbstractLossTerm):
     """
 
     scheme: AbstractScheme = CrankNicolson()
-    steps: int = eqx.field(static=True, default=16)
-    windows: int = eqx.field(static=True, default=32)
+    steps: int = eqx.field(static=True, default=16,
+                           converter=count_of("RolloutWindow's steps", least=1))
+    windows: int = eqx.field(static=True, default=32,
+                             converter=count_of("RolloutWindow's windows", least=1))
     name: ClassVar[str] = "window"
 
     def __check_init__(self):
         expect_instance(self.scheme, AbstractScheme, what="RolloutWindow's scheme",
                         expected="a scheme such as CrankNicolson() (metriplex.integrate)")
-        for what, value in (("steps", self.steps), ("windows", self.windows)):
-            if isinstance(value, bool) or not isinstance(value, numbers.Integral) \
-                    or value < 1:
-                raise MetriplexError(
-                    f"RolloutWindow's {what} must be an integer >= 1; got {what}={value!r}."
-                )
 
     @property
     def window_shape(self) -> tuple[int, int]:

@@ -23,7 +23,6 @@ of a pair is shared by all terms.
 from __future__ import annotations
 
 import abc
-import numbers
 from typing import ClassVar
 
 import equinox as eqx
@@ -31,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import jax.random as jr
 
-from ._errors import MetriplexError, expect_instance
+from ._errors import MetriplexError, count_of, expect_instance
 from ._loss_base import AbstractLossTerm, Batch, Context, Loss, Window  # noqa: F401
 from ._model import GenericModel, Terms
 from ._types import Scalar, State
@@ -195,15 +194,8 @@ class StochasticJacobi(AbstractJacobiEstimator):
     ``--jacobi stochastic --jacobi-probes K``.
     """
 
-    probes: int = eqx.field(static=True, default=1)
-
-    def __check_init__(self):
-        if isinstance(self.probes, bool) or not isinstance(self.probes, numbers.Integral) \
-                or self.probes < 1:
-            raise MetriplexError(
-                f"StochasticJacobi needs probes >= 1 (an integer: random probe triples per "
-                f"sample); got probes={self.probes!r}."
-            )
+    probes: int = eqx.field(static=True, default=1, converter=count_of(
+        "StochasticJacobi's probes (random probe triples per sample)", least=1))
 
     def mean_squared_residual(self, model: GenericModel, x: jax.Array, inv_scale: jax.Array,
                               key: jax.Array) -> jax.Array:

@@ -15,7 +15,7 @@ import equinox as eqx
 import numpy as np
 from jaxtyping import Float
 
-from .._errors import MetriplexError
+from .._errors import MetriplexError, expect_integer
 from .._model import GenericModel
 from .._types import State
 from ..structure import Known, KnownFriction, KnownPoisson
@@ -109,10 +109,7 @@ class System(abc.ABC):
         )
 
     def _check_num(self, num: int) -> None:
-        if int(num) != num or num < 1:
-            raise MetriplexError(
-                f"the number of initial states must be a positive integer; got {num!r}."
-            )
+        expect_integer(num, what="the number of initial states", least=1)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from .._errors import MetriplexError, RolloutFailure
+from .._errors import MetriplexError, RolloutFailure, expect_integer
 from .._model import GenericModel, Terms
 from .._types import Scalar, State
 from ..data import Trajectories
@@ -174,6 +174,4 @@ def generate(
 
 
 def _positive_int(value, name: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-        raise MetriplexError(f"`{name}` must be a positive integer; got {value!r}.")
-    return int(value)
+    return expect_integer(value, what=f"`{name}`", least=1)
