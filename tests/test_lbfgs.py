@@ -23,5 +23,6 @@ def test_lbfgs_finish_lowers_the_loss_and_keeps_the_better_model(cosine_lbfgs_ru
 
 
 def test_negative_lbfgs_steps_are_refused():
-    with pytest.raises(MetriplexError, match=r"--lbfgs-steps must be an integer >= 0 .* got -5"):
+    with pytest.raises(MetriplexError, match=r"--lbfgs-steps must be an integer >= 0; got -5\. "
+                                             r"It counts the iterations of the L-BFGS finish"):
         validate(RunConfig(lbfgs_steps=-5), 3)

@@ -223,7 +223,8 @@ def test_case_matches_the_system(name):
          r"positive masses and lengths; got masses=\(1.0, 0.0\)"),
         ("charged-particle", {"mirror_length": 0.0},
          r"parameters \['mirror_length'\] must be positive; got mirror_length=0.0"),
-        ("thermoelastic-chain", {"particles": 1}, r"particles >= 2; got particles=1"),
+        ("thermoelastic-chain", {"particles": 1},
+         r"particles must be an integer >= 2; got 1\. Example: particles=10"),
         ("rlc-circuit", {"inductance": -1e-3}, r"positive capacitance, inductance.*"
          r"inductance=-0.001"),
     ],

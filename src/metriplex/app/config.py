@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import MetriplexError
+from .._errors import MetriplexError, expect_integer
 from .._solve._implicit import _Implicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
 from ..io import read_matrix
@@ -247,12 +247,10 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--patience must be >= 1 evaluations; got {config.patience}.")
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
-    for name, meaning in (("lbfgs_steps", "iterations of the L-BFGS finish"),
-                          ("window_steps", "steps of the training rollouts from data states")):
-        v = getattr(config, name)
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            raise MetriplexError(f"--{name.replace('_', '-')} must be an integer >= 0 "
-                                 f"({meaning}; 0 for none); got {v!r}.")
+    for name, meaning in (("lbfgs_steps", "the iterations of the L-BFGS finish"),
+                          ("window_steps", "the steps of the training rollouts from data states")):
+        expect_integer(getattr(config, name), least=0, what=f"--{name.replace('_', '-')}",
+                       fix=f"It counts {meaning}; 0 turns it off.")
     if not 0 <= config.input_noise < 1:
         raise MetriplexError(
             f"--input-noise must be in [0, 1) (a fraction of each variable's standard "

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
-from ..._errors import MetriplexError
+from ..._errors import expect_integer
 from ..._model import GenericModel
 from ..._types import Matrix, Scalar, State
 from ...structure import CanonicalPoisson, SumOf
@@ -68,13 +68,8 @@ class ThermoelasticChainConfig:
     entropy_halfwidth: float = 0.2
 
     def __post_init__(self):
-        if isinstance(self.particles, bool) or not isinstance(self.particles, int) or (
-            self.particles < 2
-        ):
-            raise MetriplexError(
-                f"the thermoelastic chain needs an integer number of particles >= 2; got "
-                f"particles={self.particles!r}. Example: particles=10."
-            )
+        expect_integer(self.particles, what="the thermoelastic chain's particles", least=2,
+                       fix="Example: particles=10.")
         check_signs(self, "thermoelastic-chain",
                     positive=("mass", "stiffness", "heat_capacity", "theta0"),
                     nonnegative=("quartic", "friction", "conductivity", "displacement_halfwidth",
