@@ -100,6 +100,9 @@ def test_rollout_and_evaluate(oscillator_run, tmp_path):
                 "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual", "verdict"):
         assert key in m, key
     assert len(m["rollout_error"]) == len(data)
+    # The warning that the model does not beat predicting no motion comes exactly when so.
+    worse = m["rollout_error_mean_completed"] >= m["constant_prediction_error_mean_completed"]
+    assert ("NO better than predicting x(t) = x(0)" in res.stderr) == worse, res.stderr
     # The output exists now: evaluate refuses to overwrite it.
     before = digest(tmp)
     res = run("evaluate", src / "run", src / "data.npz", "--out", tmp / "metrics.json")

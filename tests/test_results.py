@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from metriplex.cli import _train_summary
 from metriplex.io import write_json
@@ -45,3 +46,36 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
     done = _train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                           Path("run"))
     assert "not converged" not in done and "FAILED" not in done and "NO trained" not in done
+
+
+def test_evaluate_reports_the_error_of_predicting_no_motion():
+    # The baseline x(t) = x(0) that a model must beat, computed by hand on the same data; a
+    # model with no motion at all (zero L and M) scores exactly that baseline, and the first
+    # second of the trajectories (to the horizon) less.
+    import metriplex as mx
+    from helpers import oscillator_data
+
+    data = oscillator_data(k=4, n_t=21)
+    ts, xs, lengths = data.padded()
+    by_hand = np.mean([np.linalg.norm(xs[k, :T] - xs[k, :1]) / np.linalg.norm(xs[k, :T])
+                       for k, T in enumerate(lengths)])
+    still = mx.GenericModel(mx.ZeroPotential(), mx.SumOf((2,)),
+                            mx.ZeroPoisson(3), mx.ZeroFriction(3))
+    report = mx.evaluate(still, data, horizon=1.0, step_check=False)
+    assert report["constant_prediction_error_mean"] == pytest.approx(by_hand, rel=1e-12)
+    assert report["rollout_error_mean"] == pytest.approx(by_hand, rel=1e-12)
+    assert report["constant_prediction_error_mean_completed"] == pytest.approx(by_hand)
+    assert 0 < report["constant_prediction_error_to_horizon_mean"] < by_hand
+
+
+def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
+    metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 0.9,
+               "rollout_error_mean_completed": 0.9, "constant_prediction_error_mean": 0.8,
+               "constant_prediction_error_mean_completed": 0.8,
+               "evaluated_on": "validation trajectories"}
+    history = _history(3000, 4000, True, "converged at step 4000")
+    line = _train_summary(history, metrics, 5.0, Path("run"))
+    assert "NO better than predicting x(t) = x(0) (8.000e-01)" in line
+    metrics.update(rollout_error_mean=0.02, rollout_error_mean_completed=0.02)
+    line = _train_summary(history, metrics, 5.0, Path("run"))
+    assert "NO better" not in line and "predicting x(t) = x(0) gives 8.000e-01" in line

@@ -3,7 +3,9 @@ r"""Diagnostics that answer "how good is this model, and is it GENERIC?".
 One set of functions judges ground-truth systems and learned models alike:
 
 - rollout errors (relative L2 per trajectory, per variable, over time) against observed data,
-  rolled out from each trajectory's first state on its own time grid;
+  rolled out from each trajectory's first state on its own time grid, beside the error of
+  predicting no motion at all, :math:`x(t) = x(0)`, which a model must beat to predict anything
+  (``constant_prediction_error_mean``);
 - the energy's relative drift and the entropy change per step along the model's own rollout;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
   factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
@@ -124,16 +126,18 @@ def evaluate(
     pred = np.asarray(out.xs, dtype=np.float64)
     ts = np.asarray(out.ts, dtype=np.float64)
     failed = np.asarray(out.failed_step)
-    per_traj, per_traj_h = [], []
+    per_traj, per_traj_h, const, const_h = [], [], [], []
     per_var_num = np.zeros(data.n)
     per_var_den = np.zeros(data.n)
     for k, T in enumerate(lengths):
         p, o = pred[k, :T], xs[k, :T]
+        const.append(_relative_error(np.broadcast_to(o[:1], o.shape), o))
         if horizon is not None:
             # Only the states up to the horizon count: a rollout that stops later has a
             # finite error up to the horizon (its failure is in `rollout_failures`).
             m = ts[k, :T] <= ts[k, 0] + horizon + 1e-12
             per_traj_h.append(_relative_error(p[m], o[m]))
+            const_h.append(_relative_error(np.broadcast_to(o[:1], o[m].shape), o[m]))
         if not np.all(np.isfinite(p)):
             per_traj.append(float("inf"))
             continue
@@ -188,6 +192,14 @@ def evaluate(
         "rollout_error_mean_completed": known(
             float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None,
             "rollout_error_mean_completed", f"no rollout completed ({failures})"),
+        # The same error for the prediction x(t) = x(0) (no motion), over all trajectories: a
+        # model whose rollouts do not beat it predicts nothing of these data.
+        "constant_prediction_error_mean": float(np.mean(const)),
+        # Over the completed rollouts only, as rollout_error_mean_completed.
+        "constant_prediction_error_mean_completed": known(
+            float(np.mean([c for c, e in zip(const, per_traj) if np.isfinite(e)]))
+            if completed else None,
+            "constant_prediction_error_mean_completed", f"no rollout completed ({failures})"),
         "energy_relative_drift": known(float(np.max(drifts)) if drifts else None,
                                        "energy_relative_drift", no_steps),
         "energy_drift_over_data_spread": known(
@@ -211,6 +223,7 @@ def evaluate(
         report["rollout_error_to_horizon_mean"] = known(
             float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
             "a rollout failed before the horizon")
+        report["constant_prediction_error_to_horizon_mean"] = float(np.mean(const_h))
     if step_check:
         sensitivity, why = step_sensitivity(model, data, scheme=scheme, rollout=rollout)
         report["step_sensitivity"] = known(sensitivity, "step_sensitivity", why)

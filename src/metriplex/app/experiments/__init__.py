@@ -136,6 +136,12 @@ def default_out(name: str, *, quick: bool = False, defaults: bool = False) -> Pa
     return Path("runs") / (name + ("-defaults" if defaults else "") + ("-quick" if quick else ""))
 
 
+def _fmt(value: float | None) -> str:
+    """A figure for the summary lines; ``null`` where it could not be computed (see
+    ``null_reasons`` in metrics.json)."""
+    return "null" if value is None else f"{value:.3e}"
+
+
 def run_experiment(
     name: str,
     *,
@@ -219,16 +225,18 @@ def run_experiment(
     }
     write_json(out / "metrics.json", metrics)
     key = "rollout_error_to_horizon_mean" if horizon else "rollout_error_mean"
-    print(f"{name}{' (quick)' if quick else ''}: test rollout error {metrics[key]:.3e} "
-          f"(untrained {untrained:.3e}; ground-truth CN {truth[key]:.3e}), learned-energy drift "
-          f"{metrics['energy_relative_drift_gauge_fixed']:.2e} (gauge-fixed), training "
+    still = metrics[key.replace("rollout_error", "constant_prediction_error")]
+    print(f"{name}{' (quick)' if quick else ''}: test rollout error {_fmt(metrics[key])} "
+          f"(untrained {untrained:.3e}; x(t) = x(0) {still:.3e}; ground-truth CN "
+          f"{truth[key]:.3e}), learned-energy drift "
+          f"{_fmt(metrics['energy_relative_drift_gauge_fixed'])} (gauge-fixed), training "
           f"{seconds:.0f} s -> {out}")
     if quick:
         print("  (the accuracy bars are for full runs; a --quick run only has to beat the "
               "untrained model by a wide margin)")
     for k, b in metrics["bars"].items():
         value = "null (" + metrics.get("null_reasons", {}).get(k, "not computed") + ")" \
-            if b["value"] is None else f"{b['value']:.3e}"
+            if b["value"] is None else _fmt(b["value"])
         print(f"  {k}: {value} vs {'full-run ' if quick else ''}target "
               f"{b['target']:.0e}: {'met' if b['met'] else 'NOT met'}")
     return metrics
