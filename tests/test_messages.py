@@ -146,6 +146,14 @@ def test_canonical_bound_on_one_variable(files, tmp_path):
                  r"variables\), but the data have n=1\. Use --poisson zero", absent=("<= 0",))
 
 
+def test_learned_poisson_on_one_variable(files, tmp_path):
+    """The default (a learned L) on one variable: the message names the way out."""
+    res = run("train", files / "one.npz", "--out", tmp_path / "r", "--quiet")
+    refused(res, r"a learned Poisson bivector needs n >= 2 variables; got 1\. With one "
+                 r"variable the only antisymmetric L is 0: pass --poisson zero")
+    assert nothing_written(tmp_path / "r")
+
+
 def test_simulate_seed(tmp_path):
     res = run("simulate", "rigid-body", "--trajectories", "1", "--steps", "2", "--dt", "0.1",
               "--seed", "-1", "--out", tmp_path / "s.npz")

@@ -206,7 +206,8 @@ def folded_network(in_size: int, n: int, triangle: str, *, width: int, depth: in
             FoldedHead(width, n, triangle, row_scale, init_scale, key=okey))
 
 
-def check_variables(n: int, at_least: int, what: str) -> None:
+def check_variables(n: int, at_least: int, what: str, fix: str = "") -> None:
     """Raise unless a state of ``n`` variables is large enough for the block ``what``."""
     if n < at_least:
-        raise MetriplexError(f"{what} needs n >= {at_least} variables; got {n}.")
+        raise MetriplexError(f"{what} needs n >= {at_least} variables; got {n}."
+                             + (f" {fix}" if fix else ""))

@@ -45,7 +45,9 @@ class SkewMLPPoisson(AbstractPoisson):
         scaling: Scaling | None = None,
         key: jax.Array,
     ) -> None:
-        check_variables(n, 2, "a learned Poisson bivector")
+        check_variables(n, 2, "a learned Poisson bivector",
+                        fix="With one variable the only antisymmetric L is 0: pass --poisson "
+                        "zero (in Python, ZeroPoisson(1)).")
         self.n = n
         self.scaling = scaling
         self.hidden, self.head = folded_network(
