@@ -38,11 +38,21 @@ def test_a_block_that_does_not_state_it_cannot_be_instantiated():
     with pytest.raises(TypeError, match="uses_gradient"):
         Forgetful()
 
-    class Stated(st.AbstractPoisson):
+    class Sizeless(st.AbstractPoisson):
         uses_gradient: ClassVar[bool] = False
 
         def __call__(self, x, grad_entropy):
             return jnp.zeros((x.shape[0], x.shape[0]), x.dtype)
+
+    with pytest.raises(TypeError, match="'n'"):
+        Sizeless()
+
+    class Stated(st.AbstractPoisson):
+        n: int = 2
+        uses_gradient: ClassVar[bool] = False
+
+        def __call__(self, x, grad_entropy):
+            return jnp.zeros((self.n, self.n), x.dtype)
 
     assert Stated()(jnp.zeros(2), jnp.zeros(2)).shape == (2, 2)
 
@@ -70,3 +80,27 @@ def test_models_share_one_abstract_base():
         Partial()
     box = BlackBoxModel(3, width=4, data=jnp.ones((4, 3)), key=jax.random.key(0))
     assert box.size() == 3 and mx.integrate.model_size(box) == 3
+
+
+def test_every_matrix_block_states_its_size_and_the_model_reads_it():
+    # `n` is an abstract variable of the matrix blocks (no getattr probing): None only where a
+    # given function's maker did not state it.
+    import metriplex as mx
+
+    def fn(x):
+        return jnp.zeros((3, 3), x.dtype)
+
+    known = mx.GenericModel(mx.ZeroPotential(), mx.ZeroPotential(), mx.KnownPoisson(fn),
+                            mx.KnownFriction(fn))
+    assert known.poisson.n is None and known.size() is None
+    stated = mx.GenericModel(mx.ZeroPotential(), mx.ZeroPotential(), mx.KnownPoisson(fn, n=3),
+                             mx.KnownFriction(fn))
+    assert stated.size() == 3
+    learned = mx.GenericModel(mx.MLPPotential(3, width=4, key=jax.random.key(0)),
+                              mx.ZeroPotential(), mx.KnownPoisson(fn), mx.KnownFriction(fn))
+    assert learned.size() == 3
+    assert mx.GenericModel(mx.ZeroPotential(), mx.ZeroPotential(), mx.ZeroPoisson(3),
+                           mx.KnownFriction(fn)).size() == 3
+    with pytest.raises(mx.MetriplexError, match=r"MaskedPoisson's base must be a Poisson or "
+                                                r"friction block .*; got 'canonical'"):
+        mx.MaskedPoisson("canonical", (1,))

@@ -13,7 +13,7 @@ from ._types import Array, Float, Matrix, Scalar, State
 from .structure import _registry
 from .structure.friction import AbstractFriction
 from .structure.poisson import AbstractPoisson
-from .structure.potential import AbstractPotential
+from .structure.potential import AbstractPotential, MLPPotential
 
 if TYPE_CHECKING:
     import numpy as np
@@ -113,11 +113,9 @@ class GenericModel(AbstractModel):
     def size(self) -> int | None:
         """The number of state variables, from the first block that states it (``None`` where
         none does, e.g. a model of known functions only)."""
-        for block in (self.poisson, self.friction, self.energy):
-            n = getattr(block, "n", None)
-            if isinstance(n, int):
-                return n
-        return None
+        sizes = (self.poisson.n, self.friction.n,
+                 self.energy.n if isinstance(self.energy, MLPPotential) else None)
+        return next((n for n in sizes if n is not None), None)
 
     def poisson_matrix(self, x: State) -> Matrix:
         """The Poisson bivector :math:`L(x)`, its block called with the entropy's gradient."""

@@ -46,6 +46,9 @@ class _AbstractMatrix(_AbstractBlock):
     #: Whether the matrix depends on the gradient argument (exactly degenerate blocks); if not,
     #: a matrix computed with another gradient can be reused.
     uses_gradient: eqx.AbstractClassVar[bool]
+    #: The number of state variables; ``None`` only for a given function whose maker did not
+    #: state it (``KnownPoisson(fn)``).
+    n: eqx.AbstractVar[int | None]
 
 
 class AbstractPoisson(_AbstractMatrix):

@@ -42,9 +42,11 @@ class AbstractZeroMatrix(eqx.Module):
 
 
 class AbstractFunctionMatrix(eqx.Module):
-    """The matrix ``fn(x)`` of a given function (ground-truth systems; not saved in files)."""
+    """The matrix ``fn(x)`` of a given function (ground-truth systems; not saved in files),
+    of size ``n`` where its maker states it."""
 
     fn: Callable = eqx.field(static=True)
+    n: int | None = eqx.field(static=True, default=None)
 
     def __call__(self, x: State, gradient: State | None = None) -> Matrix:
         """``fn(x)``; the gradient is not used."""

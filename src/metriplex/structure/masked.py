@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import MetriplexError
+from .._errors import MetriplexError, expect_instance
 from .._types import Matrix, State
-from ._abstract import AbstractFriction, AbstractPoisson
+from ._abstract import AbstractFriction, AbstractPoisson, _AbstractMatrix
 from ._registry import from_spec, register
 
 
@@ -43,13 +43,15 @@ def check_constant(constant: Sequence[Any], n: int) -> tuple[int, ...]:
 class _AbstractMasked(eqx.Module):
     """A wrapped block (``base``) whose matrix has zero rows and columns at ``constant``."""
 
-    base: Any
+    base: _AbstractMatrix
     constant: tuple[int, ...] = eqx.field(static=True)
     n: int = eqx.field(static=True)
 
-    def __init__(self, base: Any, constant: Sequence[int]) -> None:
-        n = getattr(base, "n", None)
-        if not isinstance(n, int):
+    def __init__(self, base: _AbstractMatrix, constant: Sequence[int]) -> None:
+        expect_instance(base, _AbstractMatrix, what=f"{type(self).__name__}'s base",
+                        expected="a Poisson or friction block (e.g. SkewMLPPoisson(n, key=k))")
+        n = base.n
+        if n is None:
             raise MetriplexError(
                 f"{type(self).__name__} wraps a block that states its size n (a learned or "
                 f"constant block); {type(base).__name__} does not. Wrap the learned block, or "
