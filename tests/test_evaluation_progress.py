@@ -107,7 +107,10 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     assert (tmp_path / "fig" / "error.png").exists()
     quiet = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--quiet")
     assert quiet.returncode == 0, quiet.stderr
-    assert quiet.stderr == "", quiet.stderr
+    # --quiet removes the progress, not what the results say (here that this untrained model
+    # does not beat predicting no motion): every line left is such a warning.
+    assert all(line.startswith("warning: ") for line in quiet.stderr.splitlines()), quiet.stderr
+    assert "rollouts:" not in quiet.stderr
     # rollout too
     res = run("rollout", files / "run", files / "data.npz", "--out", tmp_path / "p.npz")
     assert res.returncode == 0 and "rollouts" in res.stderr, res.stderr
