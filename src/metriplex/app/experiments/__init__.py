@@ -227,8 +227,8 @@ def run_experiment(
     key = "rollout_error_to_horizon_mean" if horizon else "rollout_error_mean"
     still = metrics[key.replace("rollout_error", "constant_prediction_error")]
     print(f"{name}{' (quick)' if quick else ''}: test rollout error {_fmt(metrics[key])} "
-          f"(untrained {untrained:.3e}; x(t) = x(0) {still:.3e}; ground-truth CN "
-          f"{truth[key]:.3e}), learned-energy drift "
+          f"(untrained {_fmt(untrained)}; x(t) = x(0) {_fmt(still)}; ground-truth CN "
+          f"{_fmt(truth[key])}), learned-energy drift "
           f"{_fmt(metrics['energy_relative_drift_gauge_fixed'])} (gauge-fixed), training "
           f"{seconds:.0f} s -> {out}")
     if quick:
