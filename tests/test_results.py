@@ -79,3 +79,32 @@ def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
     metrics.update(rollout_error_mean=0.02, rollout_error_mean_completed=0.02)
     line = _train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better" not in line and "predicting x(t) = x(0) gives 8.000e-01" in line
+
+
+def test_learned_temperatures_are_reported_and_negative_ones_warned_about():
+    # dE/ds_i where S = sum of entropy variables: a model whose heat feeds the motion (E
+    # falls with s) against the true oscillator in a bath; a learned S has no temperatures.
+    import jax.numpy as jnp
+    import metriplex as mx
+    from metriplex.app._warnings import temperature_warnings
+    from metriplex.diagnostics import structure_residuals
+    from metriplex.systems import generate, get_system
+
+    data = generate("oscillator-bath", trajectories=2, steps=20, seed=0)
+    true = structure_residuals(get_system("oscillator-bath").model, data.x)
+    assert true["temperature_negative_fraction"] == 0.0 and true["temperature_min"] > 0.5
+    assert 0.01 < true["temperature_share"] < 1.0
+    assert temperature_warnings(true) == []
+
+    cold = mx.GenericModel(mx.Known(lambda x: 0.5 * (x[0]**2 + x[1]**2) - x[2]),
+                           mx.SumOf((2,)), mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    r = structure_residuals(cold, data.x)
+    assert r["temperature_negative_fraction"] == 1.0 and r["temperature_min"] == -1.0
+    (line,) = temperature_warnings(r)
+    assert "negative at 100% of the states (least -1)" in line and "--entropy sum:" in line
+
+    learned_s = mx.GenericModel(mx.Known(lambda x: jnp.sum(x**2)), mx.Known(lambda x: x[2]),
+                                mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    r = structure_residuals(learned_s, data.x)
+    assert r["temperature_negative_fraction"] is None and temperature_warnings(r) == []
+    assert "not a sum of entropy variables" in r["null_reasons"]["temperature_min"]

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
+from ._warnings import against_constant, temperature_warnings
 
 if TYPE_CHECKING:
     import argparse
@@ -83,19 +84,6 @@ def _params(items):
     return params
 
 
-def _against_constant(metrics: dict) -> tuple[str, bool]:
-    """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
-    trajectories, and whether the model fails to beat it (``("", False)`` if none completed)."""
-    done = metrics.get("rollout_error_mean_completed")
-    base = metrics.get("constant_prediction_error_mean_completed")
-    if done is None or base is None:
-        return "", False
-    if done >= base:
-        return (f"NO better than predicting x(t) = x(0) ({base:.3e}): the model does not "
-                f"predict these trajectories"), True
-    return f"predicting x(t) = x(0) gives {base:.3e}", False
-
-
 def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
     """train's final line: how training ended, and how the held-out rollouts went."""
     last = history.step[-1] if history.step else 0
@@ -117,7 +105,7 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
             rollouts += f"; error of the {k - failed} completed: {done:.3e}"
     else:
         rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
-    against, _ = _against_constant(metrics)
+    against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
     return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
@@ -165,6 +153,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
     print(_train_summary(history, metrics, seconds, out))
+    for line in temperature_warnings(metrics):
+        print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):
         print(
             f"metriplex train: interrupted; the best model so far and a checkpoint are in {out}. "
@@ -324,10 +314,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
-    against, worse = _against_constant(metrics)
+    against, worse = against_constant(metrics)
     if worse:
         print(f"warning: the model's rollouts (relative L2 "
               f"{metrics['rollout_error_mean_completed']:.3e}) are {against}.", file=sys.stderr)
+    for line in temperature_warnings(metrics):
+        print(line, file=sys.stderr)
     if not args.no_verdict:
         from .runs import run_config, training_outcome
         from ..verdict import verdict

@@ -1,0 +1,38 @@
+"""What train and evaluate add to their figures when the figures alone could mislead: a model
+that does not beat predicting no motion, and learned temperatures that are negative."""
+
+from __future__ import annotations
+
+
+def against_constant(metrics: dict) -> tuple[str, bool]:
+    """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
+    trajectories, and whether the model fails to beat it (``("", False)`` if none completed)."""
+    done = metrics.get("rollout_error_mean_completed")
+    base = metrics.get("constant_prediction_error_mean_completed")
+    if done is None or base is None:
+        return "", False
+    if done >= base:
+        return (f"NO better than predicting x(t) = x(0) ({base:.3e}): the model does not "
+                f"predict these trajectories"), True
+    return f"predicting x(t) = x(0) gives {base:.3e}", False
+
+
+#: Above this fraction of negative learned temperatures, train and evaluate warn (0 for every
+#: true system of the zoo and of the reference experiments with S a sum of entropies). The
+#: entropies' share of the energy gradient (``temperature_share``) is reported, not warned
+#: on: a true system has it as low as 2.6e-4 (the spinning satellite).
+NEGATIVE_TEMPERATURES = 0.01
+
+
+def temperature_warnings(metrics: dict) -> list[str]:
+    """Warnings on the learned temperatures dE/ds_i (where S is a sum of entropy variables):
+    negative ones feed the motion with the entropy production."""
+    out = []
+    negative = metrics.get("temperature_negative_fraction")
+    if negative is not None and negative > NEGATIVE_TEMPERATURES:
+        out.append(f"warning: the learned temperatures dE/ds_i are negative at {negative:.0%} "
+                   f"of the states (least {metrics['temperature_min']:.3g}): entropy "
+                   "production then feeds the motion, and rollouts beyond the data can run "
+                   "away. Give more trajectories, or check which variables are entropies "
+                   "(--entropy sum:...).")
+    return out
