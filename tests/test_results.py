@@ -108,3 +108,29 @@ def test_learned_temperatures_are_reported_and_negative_ones_warned_about():
     r = structure_residuals(learned_s, data.x)
     assert r["temperature_negative_fraction"] is None and temperature_warnings(r) == []
     assert "not a sum of entropy variables" in r["null_reasons"]["temperature_min"]
+
+
+def test_the_verdict_cannot_tell_where_learned_temperatures_are_negative():
+    from metriplex._verdict_checks import _structure_checks
+    from metriplex.verdict import Thresholds
+
+    sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.01,
+          "jacobi_residual_relative": None, "friction_min_eigenvalue": 0.0,
+          "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
+          "temperature_negative_fraction": 0.3, "temperature_min": -2.5e-5,
+          "null_reasons": {"jacobi_residual_relative": "L is constant"}}
+    report = {"entropy_production_negative_fraction": 0.0}
+    def check():
+        return [r for r in _structure_checks(sr, report, Thresholds())
+                if r["name"] == "temperatures"]
+
+    (cold,) = check()
+    assert cold["passed"] is False and cold["effect"] == "cannot tell"
+    assert "least -2.5e-05" in cold["note"] and "feeds the motion" in cold["note"]
+    sr.update(temperature_negative_fraction=0.0, temperature_min=0.9)
+    (warm,) = check()
+    assert warm["passed"] is True and "feeds" not in warm["note"]
+    sr.update(temperature_negative_fraction=None, temperature_min=None)
+    sr["null_reasons"]["temperature_negative_fraction"] = "S is not a sum of entropy variables"
+    (none,) = check()
+    assert none["passed"] is None and none["value"] is None and "not a sum" in none["note"]

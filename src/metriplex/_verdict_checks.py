@@ -164,4 +164,13 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any],
     reasons.append(_reason("poisson_antisymmetry", asym, th.rounding,
                            asym is not None and asym <= th.rounding, CANNOT_TELL,
                            "|L + L^T|/|L| (L must be antisymmetric)"))
+    cold = sr["temperature_negative_fraction"]
+    reasons.append(_reason(
+        "temperatures", cold, th.negative_temperatures,
+        None if cold is None else cold <= th.negative_temperatures, CANNOT_TELL,
+        why_null.get("temperature_negative_fraction", "") if cold is None else
+        f"fraction of the data's states and entropy variables where the learned temperature "
+        f"dE/ds_i is negative (least {sr['temperature_min']:.3g})"
+        + (": entropy production feeds the motion, which no physical system does"
+           if cold > th.negative_temperatures else "")))
     return reasons

@@ -85,6 +85,13 @@ name                     limit          meaning
                                         (cannot tell)
 ``poisson_antisymmetry`` 1e-5           :math:`|L + L^\top|/|L|`, up to rounding
                                         (cannot tell)
+``temperatures``         0.01           where S is a sum of entropy variables, the
+                                        fraction of the data's states and entropies where
+                                        the learned temperature
+                                        :math:`\partial E/\partial s_i` is negative:
+                                        entropy production then feeds the motion, which
+                                        no physical system does (cannot tell; ``passed``
+                                        is ``None`` for any other entropy)
 ======================== ============== ================================================
 
 The degeneracy, Jacobi and PSD figures are taken at the data's states in standardised
@@ -149,6 +156,7 @@ class Thresholds:
     jacobi: float = 0.1
     entropy_production: float = 0.01
     rounding: float = 1e-5
+    negative_temperatures: float = 0.01
     step_sensitivity: float = 0.1
 
 
