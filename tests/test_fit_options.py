@@ -36,6 +36,17 @@ def test_every_count_takes_numpy_integers_alike():
             make()
 
 
+def test_seeds_are_checked_as_counts_are():
+    # A seed is one more integer option, with an upper bound (what NumPy and JAX accept).
+    from metriplex.app.config import check_seed
+
+    assert type(check_seed(np.uint32(7))) is int and check_seed(np.uint32(7)) == 7
+    for bad in (2**32, -1, 1.0, True):
+        with pytest.raises(mx.MetriplexError,
+                           match=rf"--seed must be an integer from 0 to 4294967295; got {bad!r}"):
+            check_seed(bad)
+
+
 @pytest.mark.parametrize("option, value, match", [
     ("checkpoint", "run/checkpoint.ckpt",
      r"checkpoint= must be None or Checkpoint\(\.\.\.\); got str .*checkpoint=Checkpoint\("),

@@ -36,16 +36,20 @@ class TrainingDiverged(MetriplexError):
         self.history = history
 
 
-def expect_integer(value: Any, *, what: str, least: int, fix: str = "") -> int:
+def expect_integer(value: Any, *, what: str, least: int, below: int | None = None,
+                   fix: str = "") -> int:
     """``value`` as an ``int``, or a :class:`MetriplexError` unless it is an integer (Python's
-    or NumPy's; not a bool, not a float such as 2.0) of at least ``least``.
+    or NumPy's; not a bool, not a float such as 2.0) of at least ``least`` and, when given,
+    less than ``below``.
 
-    The one check of the counts that options take (steps, probes, pairs); the message says
-    the rule, the value received and, when given, the ``fix``.
+    The one check of the integers that options take (steps, probes, pairs, seeds); the message
+    says the rule, the value received and, when given, the ``fix``.
     """
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least \
+            or (below is not None and value >= below):
+        rule = f">= {least}" if below is None else f"from {least} to {below - 1}"
         raise MetriplexError(
-            f"{what} must be an integer >= {least}; got {value!r}." + (f" {fix}" if fix else "")
+            f"{what} must be an integer {rule}; got {value!r}." + (f" {fix}" if fix else "")
         )
     return int(value)
 

@@ -14,8 +14,6 @@ import dataclasses
 import math
 from typing import Any
 
-import numpy as np
-
 from .._errors import MetriplexError, expect_integer
 from .._solve._implicit import _Implicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
@@ -293,12 +291,7 @@ SEED_BOUND = 2**32
 
 def check_seed(seed: Any, option: str = "--seed") -> int:
     """A PRNG seed: an integer in ``[0, 2**32)``."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
-            or not 0 <= seed < SEED_BOUND:
-        raise MetriplexError(
-            f"{option} must be an integer from 0 to {SEED_BOUND - 1}; got {seed!r}."
-        )
-    return int(seed)
+    return expect_integer(seed, what=option, least=0, below=SEED_BOUND)
 
 
 FEATURE_BLOCKS = ("energy", "entropy", "friction")
