@@ -133,6 +133,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
+        "generalisation_gap": history.generalisation_gap(),
         "stopped": history.stopped,
         "converged": history.converged,
         "data_seconds": gen_seconds,

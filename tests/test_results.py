@@ -134,3 +134,14 @@ def test_the_verdict_cannot_tell_where_learned_temperatures_are_negative():
     sr["null_reasons"]["temperature_negative_fraction"] = "S is not a sum of entropy variables"
     (none,) = check()
     assert none["passed"] is None and none["value"] is None and "not a sum" in none["note"]
+
+
+def test_generalisation_gap_is_read_at_the_kept_step():
+    history = History(step=[0, 100, 200], train={"total": [1.0, 0.5, 0.25]},
+                      valid={"total": [1.0, 1.5, 1.0]}, best_step=100)
+    assert history.generalisation_gap() == 3.0  # 1.5 / 0.5 at step 100, not the last step's 4
+    assert History(step=[0, 100], train={"total": [1.0, 0.5]},
+                   best_step=100).generalisation_gap() is None  # no validation trajectories
+    diverged = History(step=[0, 100], train={"total": [1.0, float("nan")]},
+                       valid={"total": [1.0, 2.0]}, best_step=100)
+    assert diverged.generalisation_gap() is None

@@ -56,6 +56,19 @@ class History:
         """The history as a JSON-able dict (``history.json`` of a run folder)."""
         return dataclasses.asdict(self)
 
+    def generalisation_gap(self) -> float | None:
+        """The validation loss over the training loss at the kept step (``best_step``): how
+        much worse the model fits held-out trajectories than those it was trained on. The
+        training loss is the mean over the steps before that evaluation. ``None`` without
+        validation trajectories, or where either loss is not a positive number."""
+        if self.best_step not in self.step or not self.valid.get("total"):
+            return None
+        i = self.step.index(self.best_step)
+        train, valid = self.train["total"][i], self.valid["total"][i]
+        if not (math.isfinite(train) and math.isfinite(valid) and train > 0.0):
+            return None
+        return valid / train
+
     @classmethod
     def from_json(cls, obj: dict[str, Any]) -> "History":
         """The history that :meth:`to_json` wrote; unknown keys are ignored."""
