@@ -121,6 +121,9 @@ def nothing_written(folder):
         (["--jacobi", "stochastic", "--jacobi-probes", "0"],
          r"--jacobi-probes must be >= 1 .*; got 0", ("JacobiPenalty", "StochasticJacobi")),
         (["--checkpoint-every", "0"], r"--checkpoint-every must be >= 1 .*; got 0", ()),
+        (["--average-steps", "-1"], r"--average-steps must be an integer >= 0; got -1\. It "
+         r"counts the optimiser steps that the running average of the parameters spans; 0 "
+         r"turns it off\.", ()),
         (["--poisson", "canonical:2"],
          r"--poisson canonical:2 needs 2K <= n .* n=3 variables\. Use canonical:K with "
          r"1 <= K <= 1\.", ()),

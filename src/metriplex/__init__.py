@@ -73,6 +73,7 @@ from .structure import ZeroPotential as ZeroPotential
 from .train import Checkpoint as Checkpoint
 from .train import History as History
 from .train import LBFGSFinish as LBFGSFinish
+from .train import Average as Average
 from .train import Plateau as Plateau
 from .train import RolloutCheck as RolloutCheck
 from .train import fit as fit

@@ -39,7 +39,7 @@ if TYPE_CHECKING:
     from ._loss_base import Batch, Loss
     from ._model import AbstractModel
     from ._pairs import PairStore
-    from ._validate import Plateau
+    from ._validate import Average, Plateau
     from .integrate import AbstractScheme
 
 
@@ -81,7 +81,8 @@ class Evaluation:
 @dataclasses.dataclass
 class FitLoop:
     """One run of :func:`~metriplex.fit` from ``state``: ``run_chunk`` (the compiled optimiser
-    steps on ``train``), evaluated by ``evaluation`` every ``eval_every`` steps, stopped by
+    steps on ``train``), evaluated by ``evaluation`` every ``eval_every`` steps (on the
+    running ``average`` of the parameters, where given), stopped by
     ``stopping`` (a :class:`~metriplex.train.Plateau`, where the optimiser's rate can be
     adjusted), ``patience``, ``steps`` or ``max_seconds``; optionally checkpointed and finished
     by L-BFGS."""
@@ -98,6 +99,7 @@ class FitLoop:
     rate_at: Callable[[int], Any] | None
     patience: int | None
     max_seconds: float | None
+    average: Average | None
     checkpoint: Checkpoint | None
     finish: LBFGSFinish | None
     progress: bool
@@ -124,21 +126,26 @@ class FitLoop:
         state.key, sub = jr.split(state.key)
         state.params, state.opt_state, value, parts = self.run_chunk(
             state.params, state.opt_state, sub, length, self.train)
+        state.average_params = (state.params if self.average is None else
+                                self.average.update(state.average_params, state.params, length,
+                                                    steps))
         state.train_value = float(value)
         state.train_parts = {k: float(v) for k, v in parts.items()}
         state.done += length
         self.bar.update(length)
 
     def record_evaluation(self) -> tuple[float, int]:
-        """Evaluate the current parameters, append to the history, keep the best model;
-        return the score and the rollout failures (-1 without rollouts)."""
+        """Evaluate the current parameters (their average, where averaged), append to the
+        history, keep the best model; return the score and the rollout failures (-1 without
+        rollouts)."""
         state, history, ev, stopping = self.state, self.history, self.evaluation, self.stopping
+        judged = state.average_params  # the parameters themselves unless averaged
         if state.done > 0:
             tr_total, tr_parts = state.train_value, state.train_parts
         else:
-            tr_total, tr_parts = ev.pairs(state.params, ev.train_pairs)
+            tr_total, tr_parts = ev.pairs(judged, ev.train_pairs)
         if ev.valid_pairs is not None:
-            va_total, va_parts = ev.pairs(state.params, ev.valid_pairs)
+            va_total, va_parts = ev.pairs(judged, ev.valid_pairs)
         else:
             va_total, va_parts = tr_total, {}
         history.step.append(state.done)
@@ -169,14 +176,14 @@ class FitLoop:
         else:
             state.since_best += 1
         if va_total < state.plateau_best:
-            state.plateau_best, state.restart_params = va_total, state.params
+            state.plateau_best, state.restart_params = va_total, judged
         score, failures = va_total, -1
         if ev.windows is not None:
-            score, failures = ev.rollouts(state.params)
+            score, failures = ev.rollouts(judged)
             history.rollout.append(score)
             history.rollout_failures.append(failures)
         if score < state.best_value:
-            state.best_value, state.best_params = score, state.params
+            state.best_value, state.best_params = score, judged
             history.best_step, history.best_valid = state.done, va_total
             if ev.windows is not None:
                 history.best_rollout, history.best_rollout_failures = score, failures
@@ -213,6 +220,7 @@ class FitLoop:
             state.cuts += 1
             state.lr *= stopping.factor
             state.params, state.since_best = state.restart_params, 0
+            state.average_params = state.restart_params
             state.opt_state = with_learning_rate(state.opt_state, state.lr)
         return False
 
@@ -235,7 +243,7 @@ class FitLoop:
                 if not math.isfinite(float(value)):
                     history.stopped += f"; L-BFGS stopped at iteration {done} (non-finite loss)"
                     break
-                state.params = params
+                state.params = state.average_params = params  # L-BFGS's iterates, as they are
                 done += length
                 state.done += length
                 self.bar.update(length)

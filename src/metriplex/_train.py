@@ -26,6 +26,7 @@ import optax
 from . import _checkpoint
 from ._errors import MetriplexError
 from ._fit_options import Checkpoint, LBFGSFinish
+from ._validate import Average
 from .data import Pairs, Trajectories, state_scale, time_scale
 from .losses import Batch, Loss
 
@@ -236,15 +237,18 @@ def make_lbfgs_chunk(loss: Loss, static: Any) -> tuple[
 class TrainState:
     """Everything the training loop carries from one evaluation to the next.
 
-    Arrays: the current ``params`` and ``opt_state``, the ``best_params`` (best validation
-    score, the model returned), the ``restart_params`` (best validation loss, where a plateau
-    cut restarts from) and the PRNG ``key``. Counters: optimiser steps ``done``, the best score
+    Arrays: the current ``params`` and ``opt_state``, their running average
+    ``average_params`` (:class:`~metriplex.train.Average`; the parameters that evaluations
+    judge, else equal to ``params``), the ``best_params`` (best validation score, the model
+    returned), the ``restart_params`` (best validation loss, where a plateau cut restarts from)
+    and the PRNG ``key``. Counters: optimiser steps ``done``, the best score
     and loss so far, evaluations ``since_best`` improvement, learning-rate ``cuts`` and the
     current base rate ``lr``, the last chunk's mean training loss, and the ``history``.
     """
 
     params: Any
     opt_state: Any
+    average_params: Any
     best_params: Any
     restart_params: Any
     key: Any
@@ -261,12 +265,12 @@ class TrainState:
     @classmethod
     def start(cls, params: Any, opt_state: optax.OptState, key: jax.Array,
               lr: float) -> "TrainState":
-        return cls(params=params, opt_state=opt_state, best_params=params,
-                   restart_params=params, key=key, lr=float(lr))
+        return cls(params=params, opt_state=opt_state, average_params=params,
+                   best_params=params, restart_params=params, key=key, lr=float(lr))
 
     def _arrays(self):
-        return (self.params, self.opt_state, self.best_params, self.restart_params,
-                jr.key_data(self.key))
+        return (self.params, self.opt_state, self.average_params, self.best_params,
+                self.restart_params, jr.key_data(self.key))
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the state to ``path`` atomically (JSON header + Equinox leaves)."""
@@ -280,10 +284,11 @@ class TrainState:
 
     def load(self, path: str | os.PathLike) -> "TrainState":
         """The state saved at ``path``, read with this state's array structure."""
-        (params, opt_state, best, restart, key_data), meta = _checkpoint.load(
+        (params, opt_state, average, best, restart, key_data), meta = _checkpoint.load(
             path, self._arrays())
         return TrainState(
-            params=params, opt_state=opt_state, best_params=best, restart_params=restart,
+            params=params, opt_state=opt_state, average_params=average, best_params=best,
+            restart_params=restart,
             key=jr.wrap_key_data(key_data), lr=meta["lr"], done=meta["done"],
             best_value=meta["best_value"], plateau_best=meta["plateau_best"],
             since_best=meta["since_best"], cuts=meta["cuts"], train_value=meta["train_value"],
@@ -293,7 +298,7 @@ class TrainState:
 
 def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_rate: float,
                     patience: int | None, input_noise: float, checkpoint: Any,
-                    finish: Any) -> None:
+                    finish: Any, average: Any = None) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
     if steps < 0 or batch_size < 1 or eval_every < 1:
         raise MetriplexError(
@@ -306,7 +311,8 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
         raise MetriplexError(f"patience must be >= 1 evaluations; got {patience}.")
     for name, value, cls, example in (
             ("checkpoint", checkpoint, Checkpoint, 'Checkpoint("run/checkpoint.ckpt")'),
-            ("finish", finish, LBFGSFinish, "LBFGSFinish(steps=1000)")):
+            ("finish", finish, LBFGSFinish, "LBFGSFinish(steps=1000)"),
+            ("average", average, Average, "Average(steps=500)")):
         if value is not None and not isinstance(value, cls):
             raise MetriplexError(
                 f"fit's {name}= must be None or {cls.__name__}(...); got {type(value).__name__} "

@@ -1,22 +1,24 @@
 r"""What an evaluation judges and when training stops: the held-out rollout check that keeps
-the best model (:class:`RolloutCheck`, :func:`rollout_score`) and the plateau schedule
-(:class:`Plateau`) that cuts the learning rate and ends training.
+the best model (:class:`RolloutCheck`, :func:`rollout_score`), the parameters it judges
+(:class:`Average`), and the plateau schedule (:class:`Plateau`) that cuts the learning rate and
+ends training.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+import math
+from typing import TYPE_CHECKING, Any
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._errors import MetriplexError
+from ._errors import MetriplexError, expect_integer
 from .data import Trajectories
 from .losses import Loss
 
 if TYPE_CHECKING:
-    import jax
     from jax.typing import DTypeLike
     from numpy.typing import ArrayLike
 
@@ -53,6 +55,42 @@ class Plateau:
             raise MetriplexError(
                 f"Plateau.min_delta is a relative improvement in [0, 1); got {self.min_delta}."
             )
+
+
+@dataclasses.dataclass(frozen=True)
+class Average:
+    r"""Judge each evaluation by a running average of the parameters, and keep that average.
+
+    After every chunk of :math:`k` optimiser steps (``fit``'s ``eval_every``), the average
+    :math:`\bar\theta \leftarrow \beta\bar\theta + (1-\beta)\theta` with
+    :math:`\beta = e^{-k/h}`: an exponential average of the chunks' end parameters over about
+    :math:`h` optimiser steps, :math:`h` = ``steps`` but at most a twentieth of ``fit``'s step
+    budget (so that a short run is not judged by its first steps). The validation loss, the
+    held-out rollouts and the model kept are the average's; the optimiser goes on from its own
+    parameters. A learning-rate cut restarts both from the model of the best validation loss.
+    The average smooths the step-to-step noise of Adam at a high rate, which otherwise decides
+    which model the held-out rollouts keep (docs/zoo.md, *Parameter averaging*).
+
+    ```python
+    model, history = fit(model, data, average=Average(steps=1000), key=key)
+    ```
+    """
+
+    steps: int = 500
+
+    def __post_init__(self):
+        expect_integer(self.steps, what="Average's steps", least=1,
+                       fix="Example: Average(steps=500); average=None for none.")
+
+    def weight(self, length: int, budget: int) -> float:
+        """:math:`\beta`, the weight of the old average after a chunk of ``length`` steps in a
+        run of at most ``budget`` steps."""
+        return math.exp(-length / max(min(self.steps, budget // 20), 1))
+
+    def update(self, average: Any, params: Any, length: int, budget: int) -> Any:
+        """The average after a chunk of ``length`` steps that ended at ``params``."""
+        beta = self.weight(length, budget)
+        return jax.tree_util.tree_map(lambda a, p: beta * a + (1.0 - beta) * p, average, params)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -36,7 +36,7 @@ from ._train import (
     spread,
 )
 from ._pairs import PairRows, PairStore
-from ._validate import Plateau, RolloutCheck, scheme_of
+from ._validate import Average, Plateau, RolloutCheck, scheme_of
 from .data import Pairs, Trajectories, state_scale
 from .integrate import model_size
 from .losses import CrankNicolsonResidual, Loss
@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from jax.typing import DTypeLike
     from numpy.typing import ArrayLike
 
-__all__ = ["Checkpoint", "History", "LBFGSFinish", "Plateau", "RolloutCheck",
+__all__ = ["Average", "Checkpoint", "History", "LBFGSFinish", "Plateau", "RolloutCheck",
            "adjustable_optimizer", "default_optimizer", "fit"]
 
 
@@ -64,6 +64,7 @@ def fit(
     eval_every: int = 100,
     stopping: Plateau | None = Plateau(),
     rollout_check: RolloutCheck | None = RolloutCheck(),
+    average: Average | None = Average(),
     patience: int | None = None,
     max_seconds: float | None = None,
     scale: ArrayLike | None = None,
@@ -109,6 +110,10 @@ def fit(
     ``rollout_check``: a :class:`RolloutCheck` (default) to score evaluations by held-out
     rollouts, or ``None`` to score them by the validation loss only.
 
+    ``average``: an :class:`Average` (default: over about 500 steps) to judge every evaluation
+    by a running average of the parameters and keep that average, or ``None`` to judge the
+    optimiser's parameters themselves.
+
     ``patience``: evaluations without improvement before a plateau (overrides
     ``stopping.patience``); with ``stopping=None``, before training stops.
 
@@ -145,7 +150,7 @@ def fit(
     """
     check_arguments(steps=steps, batch_size=batch_size, eval_every=eval_every,
                     learning_rate=learning_rate, patience=patience, input_noise=input_noise,
-                    checkpoint=checkpoint, finish=finish)
+                    checkpoint=checkpoint, finish=finish, average=average)
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
@@ -206,5 +211,5 @@ def fit(
     loop = FitLoop(state, static, run_chunk, full_train, evaluation, steps=steps,
                    eval_every=eval_every, stopping=stopping, adjustable=adjustable,
                    rate_at=rate_at, patience=patience, max_seconds=max_seconds,
-                   checkpoint=checkpoint, finish=finish, progress=progress)
+                   average=average, checkpoint=checkpoint, finish=finish, progress=progress)
     return loop.run(resume=resume)

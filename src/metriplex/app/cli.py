@@ -126,6 +126,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "of K steps from the first states of 32 training pairs per batch, against "
                    "the data that follow them: errors that compound over a rollout are "
                    f"trained away (default {d.window_steps}; 0 for none)")
+    w.add_argument("--average-steps", type=int, metavar="K", help="judge every validation by "
+                   "a running average of the parameters over about K optimiser steps, and keep "
+                   f"that average as the model (default {d.average_steps}; 0 for none)")
     w.add_argument("--checkpoint-every", type=int,
                    help=f"validations between checkpoints (default {d.checkpoint_every})")
     w.add_argument("--seed", type=int, help=f"PRNG seed (default {d.seed})")

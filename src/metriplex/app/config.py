@@ -97,6 +97,7 @@ class RunConfig:
     lbfgs_steps: int = 0
     input_noise: float = 0.0
     window_steps: int = 0
+    average_steps: int = 500
     constant: str = "auto"
 
     def to_json(self) -> dict[str, Any]:
@@ -246,7 +247,9 @@ def validate(config: RunConfig, n: int) -> None:
     if config.lr_cuts < 0:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
     for name, meaning in (("lbfgs_steps", "the iterations of the L-BFGS finish"),
-                          ("window_steps", "the steps of the training rollouts from data states")):
+                          ("window_steps", "the steps of the training rollouts from data states"),
+                          ("average_steps", "the optimiser steps that the running average of "
+                                            "the parameters spans")):
         expect_integer(getattr(config, name), least=0, what=f"--{name.replace('_', '-')}",
                        fix=f"It counts {meaning}; 0 turns it off.")
     if not 0 <= config.input_noise < 1:

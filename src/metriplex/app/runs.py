@@ -31,7 +31,7 @@ from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import error_over_time, evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
-from ..train import Checkpoint, LBFGSFinish, fit
+from ..train import Average, Checkpoint, LBFGSFinish, fit
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -225,6 +225,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             data_parallel=config.data_parallel,
             finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
             input_noise=config.input_noise,
+            average=Average(config.average_steps) if config.average_steps else None,
             key=fit_key,
         )
     except TrainingDiverged as e:
