@@ -83,8 +83,8 @@ class Average:
                        fix="Example: Average(steps=500); average=None for none.")
 
     def weight(self, length: int, budget: int) -> float:
-        """:math:`\beta`, the weight of the old average after a chunk of ``length`` steps in a
-        run of at most ``budget`` steps."""
+        r""":math:`\beta`, the weight of the old average after a chunk of ``length`` steps in
+        a run of at most ``budget`` steps."""
         return math.exp(-length / max(min(self.steps, budget // 20), 1))
 
     def update(self, average: Any, params: Any, length: int, budget: int) -> Any:
