@@ -70,10 +70,10 @@ from .structure import SumOf as SumOf
 from .structure import ZeroFriction as ZeroFriction
 from .structure import ZeroPoisson as ZeroPoisson
 from .structure import ZeroPotential as ZeroPotential
+from .train import Average as Average
 from .train import Checkpoint as Checkpoint
 from .train import History as History
 from .train import LBFGSFinish as LBFGSFinish
-from .train import Average as Average
 from .train import Plateau as Plateau
 from .train import RolloutCheck as RolloutCheck
 from .train import fit as fit
