@@ -129,6 +129,10 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "failed": int(report["rollout_failures"]),
         "test_trajectories": case.test_trajectories,
         "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
+        # The share of the motion that L grad E drives, learned and true: near 0 where the true
+        # one is not, friction carries the motion and the learned E is not the energy.
+        "reversible_share": report["reversible_share"],
+        "true_reversible_share": truth["reversible_share"],
         "constant_drift": drift,
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
@@ -147,22 +151,31 @@ def _kept(row: dict) -> str:
     return "-" if step is None else ("0 (untrained)" if step == 0 else str(step))
 
 
+def _share(row: dict) -> str:
+    """The learned reversible share beside the true one ("-" where L = 0)."""
+    learned, true = row.get("reversible_share"), row.get("true_reversible_share")
+    if learned is None and true is None:
+        return "-"
+    f = lambda v: "-" if v is None else f"{v:.2g}"  # noqa: E731
+    return f"{f(learned)} ({f(true)})"
+
+
 def _fmt(v: float) -> str:
     return "inf" if not np.isfinite(v) else f"{v:.2e}"
 
 
 def print_table(rows: list[dict], file=sys.stdout) -> None:
-    head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | steps | "
-            "kept | train s | bar |")
+    head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | "
+            "L∇E share (true) | steps | kept | train s | bar |")
     print(head, file=file)
-    print("|" + "---|" * 11, file=file)
+    print("|" + "---|" * 12, file=file)
     for r in rows:
         met = r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
         name = r["system"] + (" (held out)" if r["held_out"] else "")
         print(
             f"| {name} | {r['n']} | `{r['flags']}` | {_fmt(r['rel_l2'])} | "
             f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/{r['test_trajectories']} | "
-            f"{_fmt(r['ground_truth_cn_rel_l2'])} | {r['steps']} | {_kept(r)} | "
+            f"{_fmt(r['ground_truth_cn_rel_l2'])} | {_share(r)} | {r['steps']} | {_kept(r)} | "
             f"{r['train_seconds']:.0f} | "
             f"{'met' if met else 'NOT met'} |",
             file=file, flush=True,

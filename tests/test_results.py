@@ -110,6 +110,72 @@ def test_learned_temperatures_are_reported_and_negative_ones_warned_about():
     assert "not a sum of entropy variables" in r["null_reasons"]["temperature_min"]
 
 
+def test_a_learned_energy_that_drives_no_motion_is_reported_and_warned_about():
+    # The oscillator in a bath written as pure friction: E = 0 (so L grad E = 0) and the
+    # rank-one M = f f^T / (f . grad S) that reproduces the true flow f wherever the entropy
+    # grows. The true model's energy drives most of the motion; L = 0 has no share at all.
+    import jax
+    import jax.numpy as jnp
+    import metriplex as mx
+    from metriplex.app._warnings import structure_warnings
+    from metriplex.diagnostics import structure_residuals
+    from metriplex.systems import generate, get_system
+
+    true_model = get_system("oscillator-bath").model
+    data = generate("oscillator-bath", trajectories=2, steps=20, seed=0)
+    true = structure_residuals(true_model, data.x)
+    assert true["reversible_share"] > 0.5 and structure_warnings(true) == []
+
+    def pure_friction(x):
+        f = true_model.terms(x).vector_field
+        return jnp.outer(f, f) / f[2]
+
+    friction = mx.GenericModel(mx.Known(lambda x: 0.0 * x[0]), mx.SumOf((2,)),
+                               mx.CanonicalPoisson(3, 1), mx.KnownFriction(pure_friction))
+    rates = jax.vmap(lambda z: true_model.terms(z).vector_field)(jnp.asarray(data.x))
+    x = jnp.asarray(data.x)[rates[:, 2] > 1e-3 * jnp.max(rates[:, 2])]  # the entropy grows
+    assert len(x) > 20
+    assert np.allclose(jax.vmap(lambda z: friction.terms(z).vector_field)(x),
+                       jax.vmap(lambda z: true_model.terms(z).vector_field)(x))
+    r = structure_residuals(friction, x)
+    assert r["reversible_share"] == 0.0
+    (line,) = structure_warnings(r)
+    assert "drives 0.0e+00 of the motion" in line and "does not identify E" in line
+
+    heat = structure_residuals(get_system("heat-exchange").model,
+                               generate("heat-exchange", trajectories=1, steps=5, seed=0).x)
+    assert heat["reversible_share"] is None and structure_warnings(heat) == []
+    assert "L is zero at every state" in heat["null_reasons"]["reversible_share"]
+
+
+def test_the_verdict_cannot_tell_where_friction_carries_the_motion():
+    from metriplex._verdict_checks import _structure_checks
+    from metriplex.verdict import Thresholds
+
+    sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.0,
+          "jacobi_residual_relative": None, "friction_min_eigenvalue": 0.0,
+          "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
+          "temperature_negative_fraction": 0.0, "temperature_min": 0.5,
+          "reversible_share": 2e-9,
+          "null_reasons": {"jacobi_residual_relative": "L is constant"}}
+    report = {"entropy_production_negative_fraction": 0.0}
+
+    def check():
+        return [r for r in _structure_checks(sr, report, Thresholds())
+                if r["name"] == "reversible_share"]
+
+    (carried,) = check()
+    assert carried["passed"] is False and carried["effect"] == "cannot tell"
+    assert "does not identify E" in carried["note"]
+    sr["reversible_share"] = 0.7
+    (driven,) = check()
+    assert driven["passed"] is True and "identify" not in driven["note"]
+    sr["reversible_share"] = None
+    sr["null_reasons"]["reversible_share"] = "L is zero at every state"
+    (none,) = check()
+    assert none["passed"] is None and "L is zero" in none["note"]
+
+
 def test_the_verdict_cannot_tell_where_learned_temperatures_are_negative():
     from metriplex._verdict_checks import _structure_checks
     from metriplex.verdict import Thresholds

@@ -173,4 +173,12 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any],
         f"dE/ds_i is negative (least {sr['temperature_min']:.3g})"
         + (": entropy production feeds the motion, which no physical system does"
            if cold > th.negative_temperatures else "")))
+    share = sr.get("reversible_share")
+    reasons.append(_reason(
+        "reversible_share", share, th.reversible_share,
+        None if share is None else share >= th.reversible_share, CANNOT_TELL,
+        why_null.get("reversible_share", "") if share is None else
+        "share of the motion at the data's states that L grad E drives (the rest is M grad S)"
+        + (": friction carries the motion, which any flow whose entropy grows admits, so the "
+           "fit does not identify E" if share < th.reversible_share else "")))
     return reasons

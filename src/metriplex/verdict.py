@@ -92,6 +92,14 @@ name                     limit          meaning
                                         entropy production then feeds the motion, which
                                         no physical system does (cannot tell; ``passed``
                                         is ``None`` for any other entropy)
+``reversible_share``     0.01 (least)   the share of the standardised motion at the
+                                        data's states that :math:`L\nabla E` drives;
+                                        below it friction carries the motion, which any
+                                        flow whose entropy grows admits, so the fit does
+                                        not identify E (0.68–1 for every true system of
+                                        the zoo and the reference experiments with
+                                        :math:`L \ne 0`; cannot tell; ``passed`` is
+                                        ``None`` where L = 0)
 ======================== ============== ================================================
 
 The degeneracy, Jacobi and PSD figures are taken at the data's states in standardised
@@ -157,6 +165,7 @@ class Thresholds:
     entropy_production: float = 0.01
     rounding: float = 1e-5
     negative_temperatures: float = 0.01
+    reversible_share: float = 0.01
     step_sensitivity: float = 0.1
 
 

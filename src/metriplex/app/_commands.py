@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
-from ._warnings import against_constant, temperature_warnings
+from ._warnings import against_constant, structure_warnings
 
 if TYPE_CHECKING:
     import argparse
@@ -153,7 +153,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
     print(_train_summary(history, metrics, seconds, out))
-    for line in temperature_warnings(metrics):
+    for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):
         print(
@@ -318,7 +318,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     if worse:
         print(f"warning: the model's rollouts (relative L2 "
               f"{metrics['rollout_error_mean_completed']:.3e}) are {against}.", file=sys.stderr)
-    for line in temperature_warnings(metrics):
+    for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if not args.no_verdict:
         from .runs import run_config, training_outcome

@@ -1,5 +1,6 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
-that does not beat predicting no motion, and learned temperatures that are negative."""
+that does not beat predicting no motion, learned temperatures that are negative, and a learned
+energy that does not drive the motion."""
 
 from __future__ import annotations
 
@@ -35,4 +36,24 @@ def temperature_warnings(metrics: dict) -> list[str]:
                    "production then feeds the motion, and rollouts beyond the data can run "
                    "away. Give more trajectories, or check which variables are entropies "
                    "(--entropy sum:...).")
+    return out
+
+
+#: Below this share of the motion driven by L grad E (``reversible_share``), train and
+#: evaluate warn. Every true system of the zoo and of the reference experiments with L != 0
+#: has 0.68 or more.
+REVERSIBLE_SHARE = 0.01
+
+
+def structure_warnings(metrics: dict) -> list[str]:
+    """Every warning on what the learned structure means: :func:`temperature_warnings`, and a
+    learned energy that drives almost none of the motion (friction carries it)."""
+    out = temperature_warnings(metrics)
+    share = metrics.get("reversible_share")
+    if share is not None and share < REVERSIBLE_SHARE:
+        out.append(f"warning: the learned energy drives {share:.1e} of the motion (L grad E); "
+                   "friction (M grad S) carries the rest. Any flow whose entropy grows can be "
+                   "written that way, so this fit does not identify E: do not read the learned "
+                   "E as the system's energy, and expect rollouts beyond the data to run away "
+                   "(see 'Friction that carries the motion' in the README).")
     return out

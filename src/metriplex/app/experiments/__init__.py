@@ -35,7 +35,7 @@ STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
 from ...diagnostics import _potential_along, error_over_time, evaluate, rollout_data, time_to_error
 from ...integrate import CrankNicolson
 from ...io import write, write_json
-from .._warnings import temperature_warnings
+from .._warnings import structure_warnings
 from ..runs import train_run
 
 
@@ -241,7 +241,7 @@ def run_experiment(
             if b["value"] is None else _fmt(b["value"])
         print(f"  {k}: {value} vs {'full-run ' if quick else ''}target "
               f"{b['target']:.0e}: {'met' if b['met'] else 'NOT met'}")
-    for line in temperature_warnings(metrics):
+    for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     return metrics
 
