@@ -83,3 +83,17 @@ def test_experiment_pipeline_writes_everything(tmp_path):
     for stem in FIGURES + ("positions",):
         for ext in ("png", "pdf", "npz"):
             assert (out / "figures" / f"{stem}.{ext}").exists(), f"{stem}.{ext}"
+
+
+def test_reproduce_honours_degeneracy_with_and_without_defaults():
+    # --degeneracy used to be dropped silently under --defaults.
+    from metriplex.app.experiments import experiment_config
+
+    size = EXPERIMENTS["pendulum-energetic"].quick
+    assert experiment_config("pendulum-energetic", size).degeneracy == "soft"
+    assert experiment_config("pendulum-energetic", size, defaults=True).degeneracy == "auto"
+    for mode in ("soft", "exact"):
+        for defaults in (False, True):
+            config = experiment_config("pendulum-energetic", size, defaults=defaults,
+                                       degeneracy=mode)
+            assert config.degeneracy == mode

@@ -243,7 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rigid-body | pendulum-energetic | pendulum-temperature | gas-containers")
     p.add_argument("--quick", action="store_true", help="reduced size (about two minutes)")
     p.add_argument("--out", default=None, help="output folder (default runs/EXPERIMENT)")
-    p.add_argument("--degeneracy", default="soft", help="soft | exact")
+    p.add_argument("--degeneracy", default=None,
+                   help="soft | exact (default: soft, the presets'; with --defaults, auto as "
+                   "in train)")
     p.add_argument("--defaults", action="store_true",
                    help="train with the experiment's structure only (what is learned, what is "
                    "given) and default settings, as without a preset")

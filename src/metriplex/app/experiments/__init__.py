@@ -144,13 +144,31 @@ def _fmt(value: float | None) -> str:
     return "null" if value is None else f"{value:.3e}"
 
 
+def experiment_config(name: str, size: Size, *, quick: bool = False, defaults: bool = False,
+                      degeneracy: str | None = None, **overrides: Any) -> RunConfig:
+    """The :class:`~metriplex.app.config.RunConfig` that :func:`run_experiment` trains with
+    (its arguments of the same names)."""
+    exp = _check_name(name)
+    if defaults:
+        structure = {k: v for k, v in PRESETS[name].items() if k in STRUCTURE_KEYS}
+        config = RunConfig(**structure)
+        if quick:
+            config = dataclasses.replace(config, steps=size.train_steps)
+        if degeneracy is not None:
+            config = dataclasses.replace(config, degeneracy=degeneracy)
+    else:
+        config = preset(name, steps=size.train_steps, degeneracy=degeneracy or "soft",
+                        eval_every=max(size.train_steps // 50, 10), **exp.overrides)
+    return dataclasses.replace(config, **overrides)
+
+
 def run_experiment(
     name: str,
     *,
     quick: bool = False,
     out: str | Path | None = None,
     overwrite: bool = False,
-    degeneracy: str = "soft",
+    degeneracy: str | None = None,
     progress: bool = True,
     size: Size | None = None,
     defaults: bool = False,
@@ -158,6 +176,8 @@ def run_experiment(
 ) -> dict[str, Any]:
     """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
 
+    ``degeneracy`` (``"soft"`` or ``"exact"``) replaces how the degeneracies are imposed;
+    ``None`` keeps the preset's (soft) or, with ``defaults=True``, the default (``auto``).
     ``size`` replaces the experiment's data and training sizes (e.g. to study coverage);
     ``overrides`` replace fields of its :class:`~metriplex.app.config.RunConfig`. With
     ``defaults=True`` the run uses only the preset's structure (what is learned and what is
@@ -167,7 +187,7 @@ def run_experiment(
     from ...systems import generate, get_system
 
     exp = _check_name(name)
-    if degeneracy not in ("soft", "exact"):
+    if degeneracy not in (None, "soft", "exact"):
         raise MetriplexError(f"--degeneracy must be soft or exact; got {degeneracy!r}.")
     size = size if size is not None else exp.quick if quick else exp.full
     out = Path(out) if out is not None else default_out(name, quick=quick, defaults=defaults)
@@ -178,15 +198,8 @@ def run_experiment(
     test = generate(system, trajectories=size.test_trajectories, steps=size.test_steps,
                     dt=exp.dt, seed=10_000)
     gen_seconds = time.perf_counter() - t0
-    if defaults:
-        structure = {k: v for k, v in PRESETS[name].items() if k in STRUCTURE_KEYS}
-        config = RunConfig(**structure)
-        if quick:
-            config = dataclasses.replace(config, steps=size.train_steps)
-    else:
-        config = preset(name, steps=size.train_steps, degeneracy=degeneracy,
-                        eval_every=max(size.train_steps // 50, 10), **exp.overrides)
-    config = dataclasses.replace(config, **overrides)
+    config = experiment_config(name, size, quick=quick, defaults=defaults,
+                               degeneracy=degeneracy, **overrides)
     model, history, train, valid, seconds = train_run(
         data, config, out, overwrite=overwrite, progress=progress
     )
