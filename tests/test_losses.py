@@ -169,3 +169,25 @@ def test_midpoint_penalties_and_shared_midpoint_terms(exact):
                        r"\(.*midpoints.*\) or False \(.*states.*\); got 'midpoints'\. Write "
                        r"at_midpoints=True"):
         mx.PoissonDegeneracy("midpoints")
+
+
+def test_negative_temperature_hinge_sees_only_cold_states_and_no_unit():
+    # E = c (p^2 + (s - 1)^2) / 2 on states with s on both sides of 1: the temperature
+    # dE/ds = c (s - 1) is negative below s = 1 only. The term is zero where every temperature
+    # is positive, the same for any scale c of E, and refused without entropy indices.
+    def model(c):
+        energy = mx.Known(lambda x: 0.5 * c * (x[1] ** 2 + (x[2] - 1.0) ** 2))
+        return mx.GenericModel(energy, mx.SumOf((2,)), mx.CanonicalPoisson(3, 1),
+                               mx.ZeroFriction(3))
+
+    x = jnp.stack([jnp.zeros(8), jnp.linspace(-1.0, 1.0, 8), jnp.linspace(0.5, 1.5, 8)], -1)
+    warm = x.at[:, 2].add(1.0)
+    term = mx.NegativeTemperature((2,)).as_loss()
+    value = lambda m, states: float(_compiled(term)(m, Batch(states, states, jnp.ones(8),  # noqa: E731
+                                                             jnp.ones(3)))[0])
+    cold = value(model(1.0), x)
+    assert cold > 1e-3
+    assert value(model(1.0), warm) == 0.0
+    assert value(model(1e3), x) == pytest.approx(cold, rel=1e-12)
+    with pytest.raises(mx.MetriplexError, match="indices of the entropy variables"):
+        mx.NegativeTemperature(())

@@ -41,6 +41,7 @@ from .losses import DegeneracyPenalty as DegeneracyPenalty
 from .losses import DiscreteGradientResidual as DiscreteGradientResidual
 from .losses import ExactJacobi as ExactJacobi
 from .losses import FrictionDegeneracy as FrictionDegeneracy
+from .losses import NegativeTemperature as NegativeTemperature
 from .losses import JacobiPenalty as JacobiPenalty
 from .losses import Loss as Loss
 from .losses import MidpointResidual as MidpointResidual

@@ -146,6 +146,38 @@ def DegeneracyPenalty(at_midpoints: bool = False) -> Loss:
             + FrictionDegeneracy(at_midpoints=at_midpoints))
 
 
+class NegativeTemperature(AbstractLossTerm):
+    r"""A hinge on negative temperatures where :math:`S = \sum_{i\in I} x_i` (the :math:`x_i`
+    entropies): :math:`\sum_{i\in I}\operatorname{relu}(-d_iT_i)^2 / |D\nabla E|^2`, batch
+    means, :math:`T_i = \partial E/\partial x_i`, at both states of each pair.
+
+    A physical energy rises with every entropy; where a learned one falls, entropy production
+    feeds the motion. The term is a ratio of the energy's own gradients in standardised
+    coordinates, so it depends on no unit and the scale of E cannot lower it.
+    """
+
+    indices: tuple[int, ...] = eqx.field(static=True)
+    name: ClassVar[str] = "temperature"
+
+    def __check_init__(self):
+        if not self.indices or not all(isinstance(i, int) and i >= 0 for i in self.indices):
+            raise MetriplexError(
+                f"NegativeTemperature needs the indices of the entropy variables (non-negative "
+                f"integers, e.g. (8, 9)); got {self.indices!r}.")
+
+    def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
+                 key: jax.Array) -> jax.Array:
+        idx = jnp.asarray(self.indices)
+
+        def one(t: Terms) -> jax.Array:
+            g = t.grad_energy * batch.scale[None, :]
+            cold = jnp.mean(jnp.sum(jax.nn.relu(-g[:, idx]) ** 2, axis=-1))
+            size = jnp.mean(jnp.sum(g**2, axis=-1))
+            return cold / (size + jnp.finfo(size.dtype).tiny)
+
+        return 0.5 * (one(ctx.terms0) + one(ctx.terms1))
+
+
 def stochastic_jacobi(model: GenericModel, x: State, u: State, v: State, w: State) -> Scalar:
     r"""The Jacobi trilinear form :math:`J(u, v, w) = \sum J^{ijl}u_iv_jw_l` from three
     directional derivatives of :math:`L`:

@@ -26,6 +26,7 @@ from .config import (
     _known_entropy,
     _known_friction,
     _known_poisson,
+    entropy_variables,
     exact_blocks,
     scheme_from_name,
     validate,
@@ -38,6 +39,7 @@ from ..losses import (
     FrictionDegeneracy,
     JacobiPenalty,
     Loss,
+    NegativeTemperature,
     PoissonDegeneracy,
     SchemeResidual,
     StochasticJacobi,
@@ -168,6 +170,8 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
             at_midpoints=at_midpoints)
+    if config.w_temperature > 0:
+        loss = loss + config.w_temperature * NegativeTemperature(entropy_variables(config))
     if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
             and config.w_jacobi > 0:
         loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(

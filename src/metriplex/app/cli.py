@@ -94,6 +94,12 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--w-degeneracy-M", dest="w_degeneracy_M", type=float,
                    help=f"|M grad E|^2 weight (default {d.w_degeneracy_M})")
     w.add_argument("--w-jacobi", type=float, help=f"Jacobi weight (default {d.w_jacobi})")
+    w.add_argument("--w-temperature", type=float, help="weight of a hinge on negative learned "
+                   "temperatures dE/ds_i, needs --entropy sum:... (default "
+                   f"{d.w_temperature}; 0 for none)")
+    w.add_argument("--reversible-first", action="store_true", default=None,
+                   help="first train L grad E alone (no friction), then add the learned "
+                   "friction: keeps friction from carrying the motion (see the README)")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")

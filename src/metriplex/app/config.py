@@ -98,6 +98,8 @@ class RunConfig:
     input_noise: float = 0.0
     window_steps: int = 0
     average_steps: int = 500
+    w_temperature: float = 0.0
+    reversible_first: bool = False
     constant: str = "auto"
 
     def to_json(self) -> dict[str, Any]:
@@ -279,14 +281,30 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--weight-decay must be >= 0; got {config.weight_decay}.")
     if not 0 <= config.validation < 1:
         raise MetriplexError(f"--validation must lie in [0, 1); got {config.validation}.")
-    for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi"):
+    for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "w_temperature"):
         if getattr(config, name) < 0:
             raise MetriplexError(f"loss weight {name} must be >= 0; got {getattr(config, name)}.")
+    _check_thermal_options(config)
+
+
+def _check_thermal_options(config: RunConfig) -> None:
+    """``--w-temperature`` needs entropy variables; ``--reversible-first`` a learned friction
+    beside a non-zero L."""
+    if config.w_temperature > 0 and not config.entropy.startswith("sum:"):
+        raise MetriplexError(
+            f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
+            f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
+            "leave --w-temperature out.")
+    if config.reversible_first and (config.friction != "neural" or config.poisson == "zero"):
+        raise MetriplexError(
+            f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
+            f"it needs --friction neural and an L other than zero; got --friction "
+            f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
 
 
 #: The real-valued settings; each must be a finite number (``max_minutes`` may be left out).
-FLOAT_FIELDS = ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "lr", "weight_decay",
-                "validation", "max_minutes")
+FLOAT_FIELDS = ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "w_temperature", "lr",
+                "weight_decay", "validation", "max_minutes")
 
 #: Seeds are the non-negative integers below this bound (what NumPy and JAX both accept).
 SEED_BOUND = 2**32
@@ -349,6 +367,11 @@ def _known_friction(config: RunConfig, n: int):
     if config.friction == "zero":
         return ZeroFriction(n)
     return ConstantFriction(read_matrix(config.friction.partition(":")[2], "M", n))
+
+
+def entropy_variables(config: RunConfig) -> tuple[int, ...]:
+    """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
+    return tuple(int(v) for v in config.entropy.partition(":")[2].split(",") if v.strip())
 
 
 def _known_entropy(config: RunConfig, n: int):

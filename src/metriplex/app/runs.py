@@ -15,7 +15,6 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
@@ -27,9 +26,11 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
 from ._build import build_loss, build_model, constant_variables, stopping_for, units_for
+from ._report import report_figures
+from ._stages import reversible_first
 from .config import RunConfig, scheme_from_name, validate
-from ..data import Trajectories, state_scale, time_scale
-from ..diagnostics import error_over_time, evaluate, rollout_data
+from ..data import Trajectories
+from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
 from ..train import Average, Checkpoint, LBFGSFinish, fit
 
@@ -38,7 +39,6 @@ if TYPE_CHECKING:
 
     from .._model import GenericModel
     from .._train import History
-    from ..integrate import Rollout
 
 
 def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool = False) -> None:
@@ -185,6 +185,9 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
     units = units_for(config, train)
     constant = constant_variables(config, train, note=sys.stderr)
     model = build_model(config, train, key=model_key, units=units, constant=constant)
+    if config.reversible_first and not resume:
+        model = reversible_first(model, config, train, valid, units=units, constant=constant,
+                                 dtype=dtype, key=jr.fold_in(fit_key, 1), progress=progress)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     header = {
@@ -322,78 +325,3 @@ def evaluate_run(model: GenericModel, data: Trajectories, *, scheme: str = "cn",
         report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout,
                        progress=progress)
     return report
-
-
-def report_figures(model: GenericModel, data: Trajectories, folder: Path, *, scheme: str = "cn",
-                   k: int = 0, solver: str | None = None,
-                   rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
-                   progress: bool = False) -> None:
-    """The report figure set: every trajectory's rollout error over time (failed rollouts
-    marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
-    trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
-    over time, and the learned E and S along the rollout (each marks where the rollout failed,
-    if it did). Residuals are in the data's rate units (data scale / time scale).
-    ``rollout``: what :func:`~metriplex.diagnostics.rollout_data` returned for this model, data
-    and scheme, to reuse. ``progress``: a bar over the four figures (large data take a while
-    to draw)."""
-    from tqdm.auto import tqdm
-
-    sch = scheme_from_name(scheme, solver=solver)
-    out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
-    with tqdm(total=4, disable=not progress, desc="figures", unit="figure", leave=False) as bar:
-        _draw_report(model, data, folder, sch, k, out, xs, lengths, bar)
-
-
-def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
-    all_ts = np.asarray(out.ts, dtype=np.float64)
-    all_pred = np.asarray(out.xs, dtype=np.float64)
-    failed = np.asarray(out.failed_step)
-    T = int(lengths[k])
-    ts, pred, obs = all_ts[k, :T], all_pred[k, :T], xs[k, :T]
-    failed_at = float(ts[min(int(failed[k]), T - 1)]) if failed[k] >= 0 else None
-    names = list(data.names)
-    plots.save_figure(plots.trajectories(ts, pred, obs, names, failed_at=failed_at),
-                      folder / "trajectories", t=ts, learned=pred, observed=obs,
-                      names=np.array(names), failed_step=failed[k])
-    bar.update()
-    # Errors of every trajectory: NaN after a failure (never a number standing for it).
-    errors = np.full(all_pred.shape[:2], np.nan)
-    for j, Tj in enumerate(lengths):
-        errors[j, :Tj] = error_over_time(all_pred[j, :Tj], xs[j, :Tj])
-    scale = state_scale(data.x)
-    per_var = np.abs(pred - obs) / scale[None, :]
-    plots.save_figure(
-        plots.rollout_errors(all_ts, errors, failed_step=failed,
-                             per_variable=dict(zip(names, per_var.T)), trajectory=k,
-                             ids=list(data.ids)),
-        folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
-        error_per_variable=per_var, names=np.array(names))
-    bar.update()
-    # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
-    rate = scale / time_scale(data, scale)
-    tk, xk = data.select([data.ids[k]]).t[:T], obs
-    dtype = out.xs.dtype
-    x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
-    dt = jnp.asarray(np.diff(tk), dtype)
-    res = np.asarray(_pair_residuals(model, sch, x0, x1, dt), dtype=np.float64) / rate[None, :]
-    plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
-                      t=tk[1:], residual=res, names=np.array(names))
-    bar.update()
-    xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
-    E, S = (np.asarray(v, dtype=np.float64) for v in _potentials(model, xp))
-    plots.save_figure(plots.energy_entropy(ts, E, S, failed_at=failed_at),
-                      folder / "energy_entropy", t=ts, energy=E, entropy=S)
-    bar.update()
-
-
-@eqx.filter_jit
-def _pair_residuals(model, scheme, x0, x1, dt):
-    """The scheme's residual of every pair (compiled once: op by op, each operation of the
-    model would compile on its own)."""
-    t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
-    return jax.vmap(scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
-
-
-@eqx.filter_jit
-def _potentials(model, xs):
-    return jax.vmap(model.energy)(xs), jax.vmap(model.entropy)(xs)

@@ -1,0 +1,53 @@
+"""Training stages before the main one: ``--reversible-first`` trains the reversible part
+alone, so that the friction joins an energy that already drives the motion."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+
+from .._model import GenericModel, with_dtype
+from .._units import Units
+from ..data import Trajectories
+from ..train import Average, fit
+from ._build import build_loss, build_model, stopping_for
+from .config import RunConfig
+
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+
+
+def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
+                     valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
+                     dtype: DTypeLike, key: jax.Array,
+                     progress: bool = False) -> GenericModel:
+    r"""``model`` with its energy (and its learned L) taken from a first training of the same
+    configuration with no friction, :math:`\dot x = L\nabla E` alone.
+
+    With S given and entropy produced along the data, a pure-friction model (E = 0, M = f
+    f^T/σ) fits as exactly as the true one (README, *Friction that carries the motion*), and
+    training from scratch tends to end there. Started from an energy that already drives the
+    motion, the friction is left with what the energy cannot explain. The first stage keeps
+    the model of its best validation loss: its held-out rollouts cannot follow the entropies,
+    so judging it by them would keep an almost untrained one.
+    """
+    first = dataclasses.replace(config, friction="zero", reversible_first=False)
+    init_key, key = jax.random.split(key)
+    start = with_dtype(build_model(first, train, key=init_key, units=units,
+                                   constant=constant), dtype)
+    fitted, history = fit(
+        start, train, loss=build_loss(first, units), learning_rate=config.lr,
+        weight_decay=config.weight_decay, steps=config.steps, batch_size=config.batch_size,
+        validation=valid, eval_every=config.eval_every, stopping=stopping_for(first),
+        scale=units.rate, dtype=dtype, progress=progress, rollout_check=None,
+        average=Average(config.average_steps) if config.average_steps else None, key=key,
+    )
+    print(f"reversible first: L grad E alone, {history.stopped}", file=sys.stderr)
+    model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
+    if config.poisson in ("neural", "lie-poisson"):
+        model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)
+    return model

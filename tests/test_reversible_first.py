@@ -1,0 +1,36 @@
+"""``--reversible-first`` and ``--w-temperature``: the options against a friction that
+carries the motion (README, *Friction that carries the motion*)."""
+
+import dataclasses
+
+import pytest
+
+from metriplex import MetriplexError
+from metriplex.app.config import RunConfig, validate
+from metriplex.app.runs import train_run
+from metriplex.systems import generate
+
+
+def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_path, capsys):
+    data = generate("oscillator-bath", trajectories=6, steps=40, seed=0)
+    config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=300, eval_every=50,
+                       average_steps=0, validation=0.34)
+    _, cold, _, _, _ = train_run(data, config, tmp_path / "cold", progress=False)
+    assert "reversible first" not in capsys.readouterr().err
+    first = dataclasses.replace(config, reversible_first=True, w_temperature=1.0)
+    _, warm, _, _, _ = train_run(data, first, tmp_path / "warm", progress=False)
+    assert "reversible first: L grad E alone" in capsys.readouterr().err
+    # The main training's first evaluation already has an energy that drives the motion.
+    assert warm.valid["total"][0] < 0.5 * cold.valid["total"][0]
+    assert "temperature" in warm.train and "temperature" not in cold.train
+
+
+@pytest.mark.parametrize("changes,match", [
+    (dict(w_temperature=1.0), "--w-temperature .* --entropy sum:I,J,...; got --entropy neural"),
+    (dict(reversible_first=True, friction="zero"), "--reversible-first .* --friction neural"),
+    (dict(reversible_first=True, poisson="zero"), "got --friction neural --poisson zero"),
+    (dict(w_temperature=-1.0, entropy="sum:2"), "w_temperature must be >= 0"),
+])
+def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
+    with pytest.raises(MetriplexError, match=match):
+        validate(dataclasses.replace(RunConfig(), **changes), 3)
