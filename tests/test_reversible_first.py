@@ -6,7 +6,15 @@ import dataclasses
 import pytest
 
 from metriplex import MetriplexError
-from metriplex.app.config import RunConfig, validate
+from metriplex.app.config import (
+    PRESETS,
+    RunConfig,
+    exact_blocks,
+    preset,
+    reversible_first_on,
+    temperature_weight,
+    validate,
+)
 from metriplex.app.runs import train_run
 from metriplex.systems import generate
 
@@ -14,7 +22,8 @@ from metriplex.systems import generate
 def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_path, capsys):
     data = generate("oscillator-bath", trajectories=6, steps=40, seed=0)
     config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=300, eval_every=50,
-                       average_steps=0, validation=0.34)
+                       average_steps=0, validation=0.34, reversible_first=False,
+                       w_temperature=0.0)
     _, cold, _, _, _ = train_run(data, config, tmp_path / "cold", progress=False)
     assert "reversible first" not in capsys.readouterr().err
     first = dataclasses.replace(config, reversible_first=True, w_temperature=1.0)
@@ -34,3 +43,28 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
 def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     with pytest.raises(MetriplexError, match=match):
         validate(dataclasses.replace(RunConfig(), **changes), 3)
+
+
+@pytest.mark.parametrize("structure,on", [
+    (dict(poisson="canonical:1", entropy="sum:2"), True),
+    (dict(entropy="sum:2"), True),
+    (dict(poisson="zero", entropy="sum:0,1"), False),  # no L to drive the motion
+    (dict(poisson="canonical:1", entropy="sum:2", friction="zero"), False),
+    (dict(), False),  # S learned: nothing says which variables are entropies
+])
+def test_by_default_reversible_first_the_hinge_and_exact_m_go_together(structure, on):
+    config = RunConfig(**structure)
+    assert reversible_first_on(config) is on
+    assert temperature_weight(config) == (1.0 if on else 0.0)
+    assert exact_blocks(config)[1] is (on and config.friction == "neural")
+    # Said explicitly, each wins over the default.
+    off = dataclasses.replace(config, reversible_first=False, w_temperature=0.0)
+    assert not reversible_first_on(off) and temperature_weight(off) == 0.0
+    assert not exact_blocks(off)[1]
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_the_presets_keep_what_they_were_tuned_with(name):
+    config = preset(name)
+    assert not reversible_first_on(config) and temperature_weight(config) == 0.0
+    assert not config.confine

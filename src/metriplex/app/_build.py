@@ -29,6 +29,7 @@ from .config import (
     entropy_variables,
     exact_blocks,
     scheme_from_name,
+    temperature_weight,
     validate,
 )
 from .._rollout_loss import RolloutWindow
@@ -48,6 +49,7 @@ from ..structure import _registry
 from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction
 from ..structure.lie_poisson import LiePoisson
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
+from ..structure.confinement import Confinement
 from ..structure.potential import MLPPotential
 from ..train import Plateau
 
@@ -77,7 +79,9 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     blocks = _feature_blocks(config)
     feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
     energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
-                          quadratic=bool(config.quadratic), key=kE, **net)
+                          quadratic=bool(config.quadratic),
+                          confinement=Confinement.around(x) if config.confine else None,
+                          key=kE, **net)
     entropy = _known_entropy(config, n)
     if entropy is None:
         entropy = MLPPotential(n, features=feats["entropy"], data=x,
@@ -170,8 +174,8 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
             at_midpoints=at_midpoints)
-    if config.w_temperature > 0:
-        loss = loss + config.w_temperature * NegativeTemperature(entropy_variables(config))
+    if temperature_weight(config) > 0:
+        loss = loss + temperature_weight(config) * NegativeTemperature(entropy_variables(config))
     if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
             and config.w_jacobi > 0:
         loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(

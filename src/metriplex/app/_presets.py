@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from typing import Any
 
-#: Every preset was tuned and measured (docs/experiments.md) before the parameter average became
-#: the default, so it keeps judging the optimiser's own parameters.
-_TUNED_WITHOUT_AVERAGE = dict(average_steps=0)
+#: Every preset was tuned and measured (docs/experiments.md) before the parameter average, the
+#: reversible-first stage with its temperature hinge and the wall around the data's box became
+#: defaults, so it keeps what it was tuned with.
+_TUNED_WITHOUT_AVERAGE = dict(average_steps=0, reversible_first=False, w_temperature=0.0,
+                              confine=False)
 
 PRESETS: dict[str, dict[str, Any]] = {
     "rigid-body": dict(

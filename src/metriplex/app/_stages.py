@@ -10,12 +10,13 @@ from typing import TYPE_CHECKING
 import equinox as eqx
 import jax
 
+from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
 from .._units import Units
 from ..data import Trajectories
 from ..train import Average, fit
 from ._build import build_loss, build_model, stopping_for
-from .config import RunConfig
+from .config import RunConfig, temperature_weight
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -35,18 +36,29 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     the model of its best validation loss: its held-out rollouts cannot follow the entropies,
     so judging it by them would keep an almost untrained one.
     """
-    first = dataclasses.replace(config, friction="zero", reversible_first=False)
+    # The first stage keeps the hinge on negative temperatures that the main one has.
+    first = dataclasses.replace(config, friction="zero", reversible_first=False,
+                                w_temperature=temperature_weight(config))
     init_key, key = jax.random.split(key)
     start = with_dtype(build_model(first, train, key=init_key, units=units,
                                    constant=constant), dtype)
-    fitted, history = fit(
-        start, train, loss=build_loss(first, units), learning_rate=config.lr,
-        weight_decay=config.weight_decay, steps=config.steps, batch_size=config.batch_size,
-        validation=valid, eval_every=config.eval_every, stopping=stopping_for(first),
-        scale=units.rate, dtype=dtype, progress=progress, rollout_check=None,
-        average=Average(config.average_steps) if config.average_steps else None, key=key,
-    )
-    print(f"reversible first: L grad E alone, {history.stopped}", file=sys.stderr)
+    try:
+        fitted, history = fit(
+            start, train, loss=build_loss(first, units), learning_rate=config.lr,
+            weight_decay=config.weight_decay, steps=config.steps, batch_size=config.batch_size,
+            validation=valid, eval_every=config.eval_every, stopping=stopping_for(first),
+            scale=units.rate, dtype=dtype, progress=progress, rollout_check=None,
+            average=Average(config.average_steps) if config.average_steps else None, key=key,
+        )
+        stopped = history.stopped
+    except TrainingDiverged as e:
+        # The main training starts from the best energy before the divergence (or the untrained
+        # one) and meets the same settings: it keeps and saves its own best model.
+        fitted, stopped = (start if e.model is None else e.model), str(e)
+    if stopped.startswith("interrupted"):
+        # Nothing of this stage is checkpointed: stop the whole training, as Ctrl-C asks.
+        raise KeyboardInterrupt
+    print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
     if config.poisson in ("neural", "lie-poisson"):
         model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)

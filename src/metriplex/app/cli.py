@@ -95,11 +95,16 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help=f"|M grad E|^2 weight (default {d.w_degeneracy_M})")
     w.add_argument("--w-jacobi", type=float, help=f"Jacobi weight (default {d.w_jacobi})")
     w.add_argument("--w-temperature", type=float, help="weight of a hinge on negative learned "
-                   "temperatures dE/ds_i, needs --entropy sum:... (default "
-                   f"{d.w_temperature}; 0 for none)")
-    w.add_argument("--reversible-first", action="store_true", default=None,
+                   "temperatures dE/ds_i, needs --entropy sum:... (default: 1 where training "
+                   "starts with L grad E alone, else 0)")
+    w.add_argument("--reversible-first", action=argparse.BooleanOptionalAction, default=None,
                    help="first train L grad E alone (no friction), then add the learned "
-                   "friction: keeps friction from carrying the motion (see the README)")
+                   "friction, so that friction does not carry the motion (see the README; "
+                   "default: on when S is given, M learned and L not zero)")
+    w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
+                   help="add a wall to the learned E, zero on the training data's box and "
+                   "quadratic outside it, so that its level sets are bounded: with M grad E = 0 "
+                   f"no rollout can run away (default {'on' if d.confine else 'off'})")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")

@@ -36,6 +36,13 @@ from ._choices import (  # noqa: F401
 
 from ._presets import PRESETS
 
+from ._thermal import (  # noqa: F401 (re-exported)
+    check_thermal_options,
+    entropy_variables,
+    reversible_first_on,
+    temperature_weight,
+)
+
 # The command line's trajectory selection, importable from here as before.
 from ._selection import (  # noqa: F401
     IDS_SYNTAX,
@@ -98,8 +105,9 @@ class RunConfig:
     input_noise: float = 0.0
     window_steps: int = 0
     average_steps: int = 500
-    w_temperature: float = 0.0
-    reversible_first: bool = False
+    w_temperature: float | None = None
+    reversible_first: bool | None = None
+    confine: bool = False
     constant: str = "auto"
 
     def to_json(self) -> dict[str, Any]:
@@ -282,24 +290,9 @@ def validate(config: RunConfig, n: int) -> None:
     if not 0 <= config.validation < 1:
         raise MetriplexError(f"--validation must lie in [0, 1); got {config.validation}.")
     for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "w_temperature"):
-        if getattr(config, name) < 0:
+        if getattr(config, name) is not None and getattr(config, name) < 0:
             raise MetriplexError(f"loss weight {name} must be >= 0; got {getattr(config, name)}.")
-    _check_thermal_options(config)
-
-
-def _check_thermal_options(config: RunConfig) -> None:
-    """``--w-temperature`` needs entropy variables; ``--reversible-first`` a learned friction
-    beside a non-zero L."""
-    if config.w_temperature > 0 and not config.entropy.startswith("sum:"):
-        raise MetriplexError(
-            f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
-            f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
-            "leave --w-temperature out.")
-    if config.reversible_first and (config.friction != "neural" or config.poisson == "zero"):
-        raise MetriplexError(
-            f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
-            f"it needs --friction neural and an L other than zero; got --friction "
-            f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
+    check_thermal_options(config)
 
 
 #: The real-valued settings; each must be a finite number (``max_minutes`` may be left out).
@@ -319,7 +312,9 @@ FEATURE_BLOCKS = ("energy", "entropy", "friction")
 
 #: ``--degeneracy``: ``auto`` makes a learned L exactly degenerate when S is given (then
 #: L grad S = 0 costs one projection with a known gradient, and the learned entropy can never
-#: decrease in a rollout) and keeps the other conditions as penalties; ``exact`` makes every
+#: decrease in a rollout), a learned M exactly degenerate when training starts with L grad E
+#: alone (:func:`reversible_first_on`: the learned flow then conserves the learned energy) and
+#: keeps the other conditions as penalties; ``exact`` makes every
 #: learned L and M exactly degenerate; ``soft`` uses penalties only.
 DEGENERACY_MODES = ("auto", "soft", "exact")
 
@@ -330,7 +325,8 @@ def exact_blocks(config: RunConfig) -> tuple[bool, bool]:
         return True, True
     if config.degeneracy == "soft":
         return False, False
-    return config.poisson == "neural" and config.entropy.startswith("sum"), False
+    return (config.poisson == "neural" and config.entropy.startswith("sum"),
+            config.friction == "neural" and reversible_first_on(config))
 
 
 def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
@@ -367,11 +363,6 @@ def _known_friction(config: RunConfig, n: int):
     if config.friction == "zero":
         return ZeroFriction(n)
     return ConstantFriction(read_matrix(config.friction.partition(":")[2], "M", n))
-
-
-def entropy_variables(config: RunConfig) -> tuple[int, ...]:
-    """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
-    return tuple(int(v) for v in config.entropy.partition(":")[2].split(",") if v.strip())
 
 
 def _known_entropy(config: RunConfig, n: int):

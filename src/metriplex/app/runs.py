@@ -28,7 +28,7 @@ from ._selection import TrajectoryIds, format_ids
 from ._build import build_loss, build_model, constant_variables, stopping_for, units_for
 from ._report import report_figures
 from ._stages import reversible_first
-from .config import RunConfig, scheme_from_name, validate
+from .config import RunConfig, reversible_first_on, scheme_from_name, validate
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -185,7 +185,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
     units = units_for(config, train)
     constant = constant_variables(config, train, note=sys.stderr)
     model = build_model(config, train, key=model_key, units=units, constant=constant)
-    if config.reversible_first and not resume:
+    if reversible_first_on(config) and not resume:
         model = reversible_first(model, config, train, valid, units=units, constant=constant,
                                  dtype=dtype, key=jr.fold_in(fit_key, 1), progress=progress)
     model = with_dtype(model, dtype)

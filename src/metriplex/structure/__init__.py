@@ -3,6 +3,7 @@
 from ._abstract import AbstractFriction as AbstractFriction
 from ._abstract import AbstractPoisson as AbstractPoisson
 from ._abstract import AbstractPotential as AbstractPotential
+from .confinement import Confinement as Confinement
 from .constant import ConstantFriction as ConstantFriction
 from .constant import ConstantPoisson as ConstantPoisson
 from .friction import CholeskyFriction as CholeskyFriction

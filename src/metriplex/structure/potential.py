@@ -17,6 +17,7 @@ from .._errors import MetriplexError
 from .._types import Array, Float, Scalar, State
 from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, data_statistics, network_spec, standardise
 from ._abstract import AbstractPotential
+from .confinement import Confinement
 from ._registry import register
 
 if TYPE_CHECKING:
@@ -92,6 +93,9 @@ class MLPPotential(AbstractPotential):
     ~1e-2) are learned equally well. ``output_scale`` :math:`\sigma` multiplies the network:
     :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
     (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
+    ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that is zero
+    on the training data's box and quadratic outside it, so that the level sets of the
+    potential are bounded: :math:`E = \sigma(\tilde E + W)`.
 
     ```python
     E = MLPPotential(10, width=64, depth=2, key=jr.key(0))
@@ -107,6 +111,7 @@ class MLPPotential(AbstractPotential):
     scale: tuple[float, ...] | None = eqx.field(static=True)
     output_scale: float = eqx.field(static=True)
     quadratic: jax.Array | None
+    confinement: Confinement | None
 
     def __init__(
         self, n: int, *,
@@ -117,6 +122,7 @@ class MLPPotential(AbstractPotential):
         scale: Sequence[float] | None = None,
         output_scale: float = 1.0,
         quadratic: bool = False,
+        confinement: Confinement | None = None,
         key: jax.Array,
     ) -> None:
         import jax.random as jr
@@ -147,6 +153,7 @@ class MLPPotential(AbstractPotential):
         # extrapolates linearly in the forces where the network alone would be arbitrary.
         self.quadratic = (jr.normal(qkey, (in_size, in_size)) / np.sqrt(in_size)
                           if quadratic else None)
+        self.confinement = confinement
 
     def __call__(self, x: State) -> Scalar:
         z = x if self.features is None else self.features(x)
@@ -155,6 +162,8 @@ class MLPPotential(AbstractPotential):
         if self.quadratic is not None:
             W = self.quadratic.astype(z.dtype)
             y = y + 0.25 * (z @ (W + W.T) @ z)
+        if self.confinement is not None:
+            y = y + self.confinement(x)
         return y if self.output_scale == 1.0 else self.output_scale * y
 
     def spec(self) -> dict[str, Any]:
@@ -165,6 +174,7 @@ class MLPPotential(AbstractPotential):
             scale=self.scale,
             output_scale=self.output_scale,
             quadratic=self.quadratic is not None,
+            confinement=None if self.confinement is None else self.confinement.to_json(),
         )
 
     @classmethod
@@ -172,6 +182,7 @@ class MLPPotential(AbstractPotential):
         """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
         ``key`` draws weights that the model file then overwrites."""
         feats = spec.get("features")
+        wall = spec.get("confinement")
         return cls(
             n,
             width=spec["width"],
@@ -182,6 +193,7 @@ class MLPPotential(AbstractPotential):
             scale=spec.get("scale"),
             output_scale=spec.get("output_scale", 1.0),
             quadratic=spec.get("quadratic", False),
+            confinement=None if wall is None else Confinement.from_json(wall),
             key=key,
         )
 

@@ -1,0 +1,59 @@
+"""The options against a friction that carries the motion (README, *Friction that carries the
+motion*): whether training starts with L grad E alone, the weight of the hinge on negative
+learned temperatures, and their checks."""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+from .._errors import MetriplexError
+
+
+class RunConfig(Protocol):
+    """The fields of :class:`~metriplex.app.config.RunConfig` that these options read (a
+    protocol, so that this module does not import the configuration that imports it)."""
+
+    entropy: str
+    poisson: str
+    friction: str
+    reversible_first: bool | None
+    w_temperature: float | None
+
+
+def reversible_first_on(config: RunConfig) -> bool:
+    """Whether training starts with L grad E alone (``--reversible-first``). By default (left
+    out) it does when S is given (``--entropy sum:...``), M is learned and L is not zero: the
+    case where a friction alone can fit the data as exactly as the true split (README,
+    *Friction that carries the motion*)."""
+    if config.reversible_first is not None:
+        return config.reversible_first
+    return (config.entropy.startswith("sum:") and config.friction == "neural"
+            and config.poisson != "zero")
+
+
+def temperature_weight(config: RunConfig) -> float:
+    """The weight of the hinge on negative learned temperatures (``--w-temperature``); left
+    out: 1 where training starts with L grad E alone (:func:`reversible_first_on`), else 0."""
+    if config.w_temperature is not None:
+        return config.w_temperature
+    return 1.0 if reversible_first_on(config) else 0.0
+
+
+def check_thermal_options(config: RunConfig) -> None:
+    """``--w-temperature`` needs entropy variables; ``--reversible-first`` a learned friction
+    beside a non-zero L."""
+    if (config.w_temperature or 0.0) > 0 and not config.entropy.startswith("sum:"):
+        raise MetriplexError(
+            f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
+            f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
+            "leave --w-temperature out.")
+    if config.reversible_first and (config.friction != "neural" or config.poisson == "zero"):
+        raise MetriplexError(
+            f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
+            f"it needs --friction neural and an L other than zero; got --friction "
+            f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
+
+
+def entropy_variables(config: RunConfig) -> tuple[int, ...]:
+    """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
+    return tuple(int(v) for v in config.entropy.partition(":")[2].split(",") if v.strip())
