@@ -68,3 +68,15 @@ def test_the_presets_keep_what_they_were_tuned_with(name):
     config = preset(name)
     assert not reversible_first_on(config) and temperature_weight(config) == 0.0
     assert not config.confine
+
+
+def test_max_minutes_caps_both_stages(tmp_path, capsys):
+    data = generate("oscillator-bath", trajectories=6, steps=40, seed=0)
+    # 0.06 s: less than compiling one step takes on any machine, so both stages stop at their
+    # first evaluation, whatever the machine's speed.
+    config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=5000, eval_every=50,
+                       average_steps=0, validation=0.34, max_minutes=0.001)
+    _, history, _, _, _ = train_run(data, config, tmp_path / "run", progress=False)
+    err = capsys.readouterr().err
+    assert "reversible first: L grad E alone, time budget reached" in err
+    assert history.stopped.startswith("time budget reached")

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
 
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
                      valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
-                     dtype: DTypeLike, key: jax.Array,
-                     progress: bool = False) -> GenericModel:
+                     dtype: DTypeLike, key: jax.Array, progress: bool = False,
+                     max_seconds: float | None = None) -> GenericModel:
     r"""``model`` with its energy (and its learned L) taken from a first training of the same
     configuration with no friction, :math:`\dot x = L\nabla E` alone.
 
@@ -34,7 +34,8 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     training from scratch tends to end there. Started from an energy that already drives the
     motion, the friction is left with what the energy cannot explain. The first stage keeps
     the model of its best validation loss: its held-out rollouts cannot follow the entropies,
-    so judging it by them would keep an almost untrained one.
+    so judging it by them would keep an almost untrained one. ``max_seconds`` caps this stage
+    (``--max-minutes``, which the main stage shares).
     """
     # The first stage keeps the hinge on negative temperatures that the main one has.
     first = dataclasses.replace(config, friction="zero", reversible_first=False,
@@ -47,7 +48,8 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
             start, train, loss=build_loss(first, units), learning_rate=config.lr,
             weight_decay=config.weight_decay, steps=config.steps, batch_size=config.batch_size,
             validation=valid, eval_every=config.eval_every, stopping=stopping_for(first),
-            scale=units.rate, dtype=dtype, progress=progress, rollout_check=None,
+            max_seconds=max_seconds, scale=units.rate, dtype=dtype, progress=progress,
+            rollout_check=None,
             average=Average(config.average_steps) if config.average_steps else None, key=key,
         )
         stopped = history.stopped

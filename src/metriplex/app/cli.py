@@ -70,8 +70,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "them): auto (default) those constant along every training trajectory, such "
                    "as a parameter recorded with the data | none | their indices")
     g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
-                   "penalties otherwise) | soft (penalties only) | exact (L and M by "
-                   "construction)")
+                   "M grad E = 0 exact when training starts with L grad E alone, penalties "
+                   "otherwise) | soft (penalties only) | exact (L and M by construction)")
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")

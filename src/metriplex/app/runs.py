@@ -185,9 +185,12 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
     units = units_for(config, train)
     constant = constant_variables(config, train, note=sys.stderr)
     model = build_model(config, train, key=model_key, units=units, constant=constant)
+    budget = None if config.max_minutes is None else 60.0 * config.max_minutes
+    began = time.perf_counter()
     if reversible_first_on(config) and not resume:
         model = reversible_first(model, config, train, valid, units=units, constant=constant,
-                                 dtype=dtype, key=jr.fold_in(fit_key, 1), progress=progress)
+                                 dtype=dtype, key=jr.fold_in(fit_key, 1), progress=progress,
+                                 max_seconds=budget)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     header = {
@@ -206,7 +209,6 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
         "constant_variables": list(constant),
     }
     write_json(out / "config.json", header)
-    start = time.perf_counter()
     try:
         model, history = fit(
             model,
@@ -219,7 +221,9 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             validation=valid,
             eval_every=config.eval_every,
             stopping=stopping_for(config),
-            max_seconds=None if config.max_minutes is None else 60.0 * config.max_minutes,
+            # --max-minutes caps both stages together; the main one gets what is left.
+            max_seconds=None if budget is None else max(budget - (time.perf_counter() - began),
+                                                        1.0),
             scale=units.rate,
             dtype=dtype,
             progress=progress,
@@ -237,7 +241,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
         if e.history is not None:
             write_json(out / "history.json", e.history.to_json())
         raise
-    seconds = time.perf_counter() - start
+    seconds = time.perf_counter() - began  # both stages
     save(out / "model.mpx", model, n=data.n, names=data.names,
          extra={"train_seconds": seconds})
     write_json(out / "history.json", history.to_json())
