@@ -50,12 +50,14 @@ def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     (dict(entropy="sum:2"), True),
     (dict(poisson="zero", entropy="sum:0,1"), False),  # no L to drive the motion
     (dict(poisson="canonical:1", entropy="sum:2", friction="zero"), False),
-    (dict(), False),  # S learned: nothing says which variables are entropies
+    (dict(entropy="zero"), False),  # no S: M grad S = 0, the friction does nothing
+    (dict(), True),  # all learned: no entropy variables, so no hinge (below)
 ])
 def test_by_default_reversible_first_the_hinge_and_exact_m_go_together(structure, on):
     config = RunConfig(**structure)
     assert reversible_first_on(config) is on
-    assert temperature_weight(config) == (1.0 if on else 0.0)
+    hinge = on and config.entropy.startswith("sum:")
+    assert temperature_weight(config) == (1.0 if hinge else 0.0)
     assert exact_blocks(config)[1] is (on and config.friction == "neural")
     # Said explicitly, each wins over the default.
     off = dataclasses.replace(config, reversible_first=False, w_temperature=0.0)
@@ -80,3 +82,11 @@ def test_max_minutes_caps_both_stages(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "reversible first: L grad E alone, time budget reached" in err
     assert history.stopped.startswith("time budget reached")
+
+
+def test_with_s_learned_reversible_first_adds_no_temperature_hinge():
+    # Everything learned: training starts from L grad E, but without entropy variables there
+    # are no temperatures dE/ds_i to hinge on.
+    config = RunConfig()
+    assert reversible_first_on(config) and temperature_weight(config) == 0.0
+    assert exact_blocks(config) == (False, True)

@@ -22,21 +22,22 @@ class RunConfig(Protocol):
 
 def reversible_first_on(config: RunConfig) -> bool:
     """Whether training starts with L grad E alone (``--reversible-first``). By default (left
-    out) it does when S is given (``--entropy sum:...``), M is learned and L is not zero: the
-    case where a friction alone can fit the data as exactly as the true split (README,
-    *Friction that carries the motion*)."""
+    out) it does when M is learned beside an L and an S that are not zero: then a friction
+    alone can fit the data as well as the true split (README, *Friction that carries the
+    motion*)."""
     if config.reversible_first is not None:
         return config.reversible_first
-    return (config.entropy.startswith("sum:") and config.friction == "neural"
-            and config.poisson != "zero")
+    return (config.friction == "neural" and config.poisson != "zero"
+            and config.entropy != "zero")
 
 
 def temperature_weight(config: RunConfig) -> float:
     """The weight of the hinge on negative learned temperatures (``--w-temperature``); left
-    out: 1 where training starts with L grad E alone (:func:`reversible_first_on`), else 0."""
+    out: 1 where the entropy variables are named and training starts with L grad E alone
+    (:func:`reversible_first_on`), else 0."""
     if config.w_temperature is not None:
         return config.w_temperature
-    return 1.0 if reversible_first_on(config) else 0.0
+    return 1.0 if config.entropy.startswith("sum:") and reversible_first_on(config) else 0.0
 
 
 def check_thermal_options(config: RunConfig) -> None:

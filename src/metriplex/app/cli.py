@@ -100,7 +100,7 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--reversible-first", action=argparse.BooleanOptionalAction, default=None,
                    help="first train L grad E alone (no friction), then add the learned "
                    "friction, so that friction does not carry the motion (see the README; "
-                   "default: on when S is given, M learned and L not zero)")
+                   "default: on when M is learned and neither L nor S is zero)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box and "
                    "quadratic outside it, so that its level sets are bounded: with M grad E = 0 "
