@@ -3,6 +3,9 @@ carries the motion (README, *Friction that carries the motion*)."""
 
 import dataclasses
 
+import equinox as eqx
+import jax.numpy as jnp
+import jax.random as jr
 import pytest
 
 from metriplex import MetriplexError
@@ -15,6 +18,7 @@ from metriplex.app.config import (
     temperature_weight,
     validate,
 )
+from metriplex.app._build import build_model, units_for
 from metriplex.app.runs import train_run
 from metriplex.systems import generate
 
@@ -90,3 +94,30 @@ def test_with_s_learned_reversible_first_adds_no_temperature_hinge():
     config = RunConfig()
     assert reversible_first_on(config) and temperature_weight(config) == 0.0
     assert exact_blocks(config) == (False, True)
+
+
+@pytest.mark.parametrize("poisson", ["neural", "casimir3", "lie-poisson"])
+def test_every_learned_l_of_the_first_stage_is_carried_into_the_main_one(poisson, monkeypatch):
+    import metriplex.app._stages as stages
+
+    data = generate("relaxing-rigid-body", trajectories=4, steps=20, seed=0)
+    config = RunConfig(poisson=poisson, steps=40, eval_every=20, average_steps=0,
+                       validation=0.0)
+    fitted = {}
+    real_fit = stages.fit
+
+    def spy(*args, **kwargs):
+        model, history = real_fit(*args, **kwargs)
+        fitted["model"] = model
+        return model, history
+
+    monkeypatch.setattr(stages, "fit", spy)
+    units = units_for(config, data)
+    start = build_model(config, data, key=jr.key(0), units=units)
+    model = stages.reversible_first(start, config, data, None, units=units, constant=(),
+                                    dtype=jnp.float64, key=jr.key(1))
+    assert bool(eqx.tree_equal(model.poisson, fitted["model"].poisson))
+    assert bool(eqx.tree_equal(model.energy, fitted["model"].energy))
+    assert bool(eqx.tree_equal(model.friction, start.friction))
+    # The first stage did train L: it is not the L the main model was built with.
+    assert not bool(eqx.tree_equal(model.poisson, start.poisson))

@@ -16,7 +16,7 @@ from .._units import Units
 from ..data import Trajectories
 from ..train import Average, fit
 from ._build import build_loss, build_model, stopping_for
-from .config import RunConfig, temperature_weight
+from .config import LEARNED_POISSON, RunConfig, temperature_weight
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -62,6 +62,6 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
         raise KeyboardInterrupt
     print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
-    if config.poisson in ("neural", "lie-poisson"):
+    if config.poisson in LEARNED_POISSON:
         model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)
     return model
