@@ -1,12 +1,13 @@
 """From a :class:`~metriplex.app.config.RunConfig` to the objects the library works with: the
 data's :class:`~metriplex.Units` (:func:`units_for`), the model (:func:`build_model`), the
-stopping rule (:func:`stopping_for`) and the loss (:func:`build_loss`). The configuration's
+stopping rule (:func:`stopping_for`), the settings every training stage shares
+(:func:`fit_settings`) and the loss (:func:`build_loss`). The configuration's
 strings are read in :mod:`metriplex.app.config`; this module turns checked settings into objects.
 """
 
 from __future__ import annotations
 
-from typing import TextIO
+from typing import Any, TextIO
 
 import jax
 import jax.random as jr
@@ -51,7 +52,7 @@ from ..structure.lie_poisson import LiePoisson
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.confinement import Confinement
 from ..structure.potential import MLPPotential
-from ..train import Plateau
+from ..train import Average, Plateau
 
 def units_for(config: RunConfig, data: Trajectories) -> Units:
     """The data's :class:`~metriplex.Units` for the blocks that ``config`` gives."""
@@ -151,6 +152,17 @@ def stopping_for(config: RunConfig) -> Plateau | None:
     return Plateau(patience=config.patience, cuts=config.lr_cuts)
 
 
+def fit_settings(config: RunConfig) -> dict[str, Any]:
+    """The arguments of :func:`~metriplex.fit` that every training stage of ``config`` shares:
+    the optimiser, the step budget, the batches, the evaluations and the schedule."""
+    return dict(
+        learning_rate=config.lr, weight_decay=config.weight_decay, steps=config.steps,
+        batch_size=config.batch_size, eval_every=config.eval_every,
+        stopping=stopping_for(config),
+        average=Average(config.average_steps) if config.average_steps else None,
+    )
+
+
 def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     r"""Scheme residual plus the penalties that the structure needs (none where exact).
 
@@ -174,8 +186,9 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
             at_midpoints=at_midpoints)
-    if temperature_weight(config) > 0:
-        loss = loss + temperature_weight(config) * NegativeTemperature(entropy_variables(config))
+    w_temperature = temperature_weight(config)
+    if w_temperature > 0:
+        loss = loss + w_temperature * NegativeTemperature(entropy_variables(config))
     if config.jacobi != "none" and config.poisson in ("neural", "lie-poisson") \
             and config.w_jacobi > 0:
         loss = loss + config.w_jacobi * (e**4 / tau**2) * JacobiPenalty(

@@ -14,8 +14,8 @@ from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
 from .._units import Units
 from ..data import Trajectories
-from ..train import Average, fit
-from ._build import build_loss, build_model, stopping_for
+from ..train import fit
+from ._build import build_loss, build_model, fit_settings
 from .config import LEARNED_POISSON, RunConfig, temperature_weight
 
 if TYPE_CHECKING:
@@ -45,12 +45,9 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                    constant=constant), dtype)
     try:
         fitted, history = fit(
-            start, train, loss=build_loss(first, units), learning_rate=config.lr,
-            weight_decay=config.weight_decay, steps=config.steps, batch_size=config.batch_size,
-            validation=valid, eval_every=config.eval_every, stopping=stopping_for(first),
+            start, train, loss=build_loss(first, units), validation=valid,
             max_seconds=max_seconds, scale=units.rate, dtype=dtype, progress=progress,
-            rollout_check=None,
-            average=Average(config.average_steps) if config.average_steps else None, key=key,
+            rollout_check=None, key=key, **fit_settings(first),
         )
         stopped = history.stopped
     except TrainingDiverged as e:

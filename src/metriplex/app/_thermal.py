@@ -9,7 +9,7 @@ from typing import Protocol
 from .._errors import MetriplexError
 
 
-class RunConfig(Protocol):
+class ThermalFields(Protocol):
     """The fields of :class:`~metriplex.app.config.RunConfig` that these options read (a
     protocol, so that this module does not import the configuration that imports it)."""
 
@@ -20,7 +20,7 @@ class RunConfig(Protocol):
     w_temperature: float | None
 
 
-def reversible_first_on(config: RunConfig) -> bool:
+def reversible_first_on(config: ThermalFields) -> bool:
     """Whether training starts with L grad E alone (``--reversible-first``). By default (left
     out) it does when M is learned beside an L and an S that are not zero: then a friction
     alone can fit the data as well as the true split (README, *Friction that carries the
@@ -31,7 +31,7 @@ def reversible_first_on(config: RunConfig) -> bool:
             and config.entropy != "zero")
 
 
-def temperature_weight(config: RunConfig) -> float:
+def temperature_weight(config: ThermalFields) -> float:
     """The weight of the hinge on negative learned temperatures (``--w-temperature``); left
     out: 1 where the entropy variables are named and training starts with L grad E alone
     (:func:`reversible_first_on`), else 0."""
@@ -40,7 +40,7 @@ def temperature_weight(config: RunConfig) -> float:
     return 1.0 if config.entropy.startswith("sum:") and reversible_first_on(config) else 0.0
 
 
-def check_thermal_options(config: RunConfig) -> None:
+def check_thermal_options(config: ThermalFields) -> None:
     """``--w-temperature`` needs entropy variables; ``--reversible-first`` a learned friction
     beside a non-zero L."""
     if (config.w_temperature or 0.0) > 0 and not config.entropy.startswith("sum:"):
@@ -55,6 +55,6 @@ def check_thermal_options(config: RunConfig) -> None:
             f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
 
 
-def entropy_variables(config: RunConfig) -> tuple[int, ...]:
+def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
     """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
     return tuple(int(v) for v in config.entropy.partition(":")[2].split(",") if v.strip())

@@ -102,8 +102,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "friction, so that friction does not carry the motion (see the README; "
                    "default: on when M is learned and neither L nor S is zero)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
-                   help="add a wall to the learned E, zero on the training data's box and "
-                   "quadratic outside it, so that its level sets are bounded: with M grad E = 0 "
+                   help="add a wall to the learned E, zero on the training data's box widened "
+                   "by one standard deviation and quadratic outside it, so that its level sets "
+                   "are bounded: with M grad E = 0 "
                    f"no rollout can run away (default {'on' if d.confine else 'off'})")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")

@@ -25,14 +25,14 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from ._build import build_loss, build_model, constant_variables, stopping_for, units_for
+from ._build import build_loss, build_model, constant_variables, fit_settings, units_for
 from ._report import report_figures
 from ._stages import reversible_first
 from .config import RunConfig, reversible_first_on, scheme_from_name, validate
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
-from ..train import Average, Checkpoint, LBFGSFinish, fit
+from ..train import Checkpoint, LBFGSFinish, fit
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -214,13 +214,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             model,
             train,
             loss=loss,
-            learning_rate=config.lr,
-            weight_decay=config.weight_decay,
-            steps=config.steps,
-            batch_size=config.batch_size,
             validation=valid,
-            eval_every=config.eval_every,
-            stopping=stopping_for(config),
             # --max-minutes caps both stages together; the main one gets what is left.
             max_seconds=None if budget is None else max(budget - (time.perf_counter() - began),
                                                         1.0),
@@ -232,8 +226,8 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
             data_parallel=config.data_parallel,
             finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
             input_noise=config.input_noise,
-            average=Average(config.average_steps) if config.average_steps else None,
             key=fit_key,
+            **fit_settings(config),
         )
     except TrainingDiverged as e:
         if e.model is not None:
