@@ -211,3 +211,27 @@ def test_generalisation_gap_is_read_at_the_kept_step():
     diverged = History(step=[0, 100], train={"total": [1.0, float("nan")]},
                        valid={"total": [1.0, 2.0]}, best_step=100)
     assert diverged.generalisation_gap() is None
+
+
+def test_a_learned_entropy_that_the_flow_decreases_is_warned_about():
+    # S = q on the oscillator in a bath: with the canonical L, dS/dt = p, negative on half the
+    # orbit, because L grad S != 0 (the penalty can leave that); the true model has none.
+    import jax.numpy as jnp
+    import metriplex as mx
+    from metriplex.app._warnings import structure_warnings
+    from metriplex.diagnostics import evaluate
+    from metriplex.systems import generate, get_system
+
+    data = generate("oscillator-bath", trajectories=2, steps=40, seed=0)
+    true = evaluate(get_system("oscillator-bath").model, data)
+    assert true["entropy_production_negative_fraction"] == 0.0
+    assert not [w for w in structure_warnings(true) if "entropy decreases" in w]
+
+    wrong = mx.GenericModel(mx.Known(lambda x: 0.5 * (x[0]**2 + x[1]**2)),
+                            mx.Known(lambda x: x[0]), mx.CanonicalPoisson(3, 1),
+                            mx.ZeroFriction(3))
+    r = evaluate(wrong, data)
+    assert 0.2 < r["entropy_production_negative_fraction"] < 0.8
+    (line,) = [w for w in structure_warnings(r) if "entropy decreases" in w]
+    assert f"{r['entropy_production_negative_fraction']:.0%} of the rollout states" in line
+    assert "--degeneracy exact" in line

@@ -1,6 +1,6 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
-that does not beat predicting no motion, learned temperatures that are negative, and a learned
-energy that does not drive the motion."""
+that does not beat predicting no motion, learned temperatures that are negative, a learned
+energy that does not drive the motion, and a learned entropy that decreases."""
 
 from __future__ import annotations
 
@@ -45,10 +45,25 @@ def temperature_warnings(metrics: dict) -> list[str]:
 REVERSIBLE_SHARE = 0.01
 
 
+#: Above this fraction of rollout states where the model's own flow decreases its learned
+#: entropy (``entropy_production_negative_fraction``), train and evaluate warn. A GENERIC
+#: model has none: its entropy production is grad S . M grad S >= 0.
+NEGATIVE_PRODUCTION = 0.01
+
+
 def structure_warnings(metrics: dict) -> list[str]:
-    """Every warning on what the learned structure means: :func:`temperature_warnings`, and a
-    learned energy that drives almost none of the motion (friction carries it)."""
+    """Every warning on what the learned structure means: :func:`temperature_warnings`, a
+    learned energy that drives almost none of the motion (friction carries it), and a learned
+    entropy that the model's own flow decreases (L grad S = 0 only as a penalty)."""
     out = temperature_warnings(metrics)
+    negative = metrics.get("entropy_production_negative_fraction")
+    if negative is not None and negative > NEGATIVE_PRODUCTION:
+        residual = metrics.get("degeneracy_L_gradS_relative")
+        held = "" if residual is None else f" (relative L grad S residual {residual:.2g})"
+        out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
+                   f"states: L grad S = 0 holds only as a penalty{held}, so this S is not an "
+                   "entropy of the model's flow. --degeneracy exact makes it exact (the "
+                   "entropy then never decreases; it can cost accuracy, see docs/zoo.md).")
     share = metrics.get("reversible_share")
     if share is not None and share < REVERSIBLE_SHARE:
         out.append(f"warning: the learned energy drives {share:.1e} of the motion (L grad E); "
