@@ -216,7 +216,6 @@ def test_generalisation_gap_is_read_at_the_kept_step():
 def test_a_learned_entropy_that_the_flow_decreases_is_warned_about():
     # S = q on the oscillator in a bath: with the canonical L, dS/dt = p, negative on half the
     # orbit, because L grad S != 0 (the penalty can leave that); the true model has none.
-    import jax.numpy as jnp
     import metriplex as mx
     from metriplex.app._warnings import structure_warnings
     from metriplex.diagnostics import evaluate
