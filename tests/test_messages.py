@@ -358,12 +358,10 @@ def test_read_only_folder(files, tmp_path):
 
 def test_unwritable_folder_as_any_user(files, tmp_path, monkeypatch):
     """The same check where the test runs as root: the folder reports itself unwritable."""
-    import metriplex.io
-
     ro = tmp_path / "ro"
     ro.mkdir()
     real = os.access
-    monkeypatch.setattr(metriplex.io.os, "access",
+    monkeypatch.setattr(os, "access",
                         lambda p, mode, **kw: False if str(p) == str(ro) else real(p, mode, **kw))
     refused(run("train", files / "missing.npz", "--out", ro / "a" / "run"),
             r"cannot write --out '.*ro/a/run': the folder '.*ro' is not writable \(permission "

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from metriplex.cli import _train_summary
+from metriplex.app._commands import _train_summary
 from metriplex.io import write_json
 from metriplex.train import History
 

@@ -16,7 +16,7 @@ MAGIC = b"METRIPLEX-CHECKPOINT\n"
 
 
 def save(path: str | os.PathLike, tree: Any, meta: dict) -> None:
-    from .io import _json_default, atomic_write
+    from .io._files import _json_default, atomic_write
 
     buf = _io.BytesIO()
     buf.write(MAGIC)

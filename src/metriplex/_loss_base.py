@@ -6,7 +6,6 @@ The terms themselves are in :mod:`metriplex.losses`, which re-exports these name
 from __future__ import annotations
 
 import abc
-from typing import ClassVar
 from typing import NamedTuple
 
 import equinox as eqx
@@ -51,9 +50,10 @@ class Context(NamedTuple):
 
 
 class AbstractLossTerm(eqx.Module):
-    """One named term of the loss; returns the batch mean of a squared norm."""
+    """One named term of the loss; returns the batch mean of a squared norm. Each final term
+    states its ``name`` (the key of its figure in the training history)."""
 
-    name: ClassVar[str] = ""
+    name: eqx.AbstractClassVar[str]
 
     @property
     def needs_midpoints(self) -> bool:

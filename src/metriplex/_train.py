@@ -122,8 +122,9 @@ def annealing(step: int, start: int, end: int) -> float:
 def _rate_state(opt_state):
     """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
     last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
-    hyper = getattr(last, "hyperparams", None)
-    return last if isinstance(hyper, dict) and "step_size" in hyper else None
+    if isinstance(last, optax.InjectHyperparamsState) and "step_size" in last.hyperparams:
+        return last
+    return None
 
 
 def is_adjustable(opt_state: optax.OptState) -> bool:

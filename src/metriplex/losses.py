@@ -68,7 +68,7 @@ class SchemeResidual(AbstractLossTerm):
         return _sq(r, batch.scale)
 
 
-class _Degeneracy(AbstractLossTerm):
+class _AbstractDegeneracy(AbstractLossTerm):
     at_midpoints: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
@@ -111,7 +111,7 @@ def DiscreteGradientResidual() -> SchemeResidual:
     return SchemeResidual(DiscreteGradient())
 
 
-class PoissonDegeneracy(_Degeneracy):
+class PoissonDegeneracy(_AbstractDegeneracy):
     r""":math:`|L\nabla S|^2` at both states of each pair (the seed paper's weight :math:`w_S`).
 
     ``at_midpoints=True`` evaluates it once per pair at :math:`\bar x = (x_0 + x_1)/2`
@@ -128,7 +128,7 @@ class PoissonDegeneracy(_Degeneracy):
         return jnp.einsum("bij,bj->bi", t.poisson, t.grad_entropy)
 
 
-class FrictionDegeneracy(_Degeneracy):
+class FrictionDegeneracy(_AbstractDegeneracy):
     r""":math:`|M\nabla E|^2` at both states of each pair (the seed paper's weight :math:`w_E`),
     or, with ``at_midpoints=True``, at their midpoints (see :class:`PoissonDegeneracy`)."""
 

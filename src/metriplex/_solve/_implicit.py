@@ -16,7 +16,7 @@ from ._scheme import AbstractScheme
 from .root_finder import AbstractRootFinder, FixedPointThenNewton
 
 
-class _Implicit(AbstractScheme):
+class _AbstractImplicit(AbstractScheme):
     r"""A step :math:`x_1 = x_0 + \Delta t\,\bar f(x_0, x_1)`, solved by ``root_finder``.
 
     ``root_finder``: how the step is solved, an :class:`~metriplex.integrate.AbstractRootFinder`

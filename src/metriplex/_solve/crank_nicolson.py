@@ -6,10 +6,10 @@ from typing import ClassVar
 
 from .._model import GenericModel, Terms
 from .._types import Scalar, State
-from ._implicit import _Implicit
+from ._implicit import _AbstractImplicit
 
 
-class CrankNicolson(_Implicit):
+class CrankNicolson(_AbstractImplicit):
     r"""Crank–Nicolson (trapezoidal rule): :math:`\frac{x_{n+1}-x_n}{\Delta t} =
     \tfrac12\big(f(x_n) + f(x_{n+1})\big)`. Second order; the seed paper's scheme."""
 

@@ -14,7 +14,7 @@ from .._errors import MetriplexError, RolloutFailure
 from .._model import AbstractModel
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
-from ._implicit import _Implicit
+from ._implicit import _AbstractImplicit
 from .root_finder import Newton, _solver_name
 from .crank_nicolson import CrankNicolson
 
@@ -106,9 +106,9 @@ def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") 
     3", follows the times), and what to try, in the words of ``scheme``: an implicit step's
     solve did not converge; an explicit step (RK4) has nothing to converge, its new state was
     not finite."""
-    name = getattr(scheme, "name", "") or type(scheme).__name__
+    name = scheme.name
     span = f"from t={t0:.6g} to t={t1:.6g}{where}"
-    if isinstance(scheme, _Implicit):
+    if isinstance(scheme, _AbstractImplicit):
         solver = _solver_name(scheme.root_finder)
         newton = ("" if isinstance(scheme.root_finder, Newton)
                   else "the Newton solver (--solver newton), ")

@@ -338,7 +338,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
     if "verdict" in metrics:
         summary["verdict"] = metrics["verdict"]["outcome"]
-    from ..io import _strict
+    from ..io._files import _strict
 
     print(json.dumps(_strict(summary), indent=2, default=str))
     if args.strict:

@@ -12,14 +12,11 @@ import re
 import sys
 from typing import Any, NoReturn
 
-from ._commands import (_config_from_args, _train_summary, cmd_evaluate, cmd_reproduce,
-                        cmd_rollout, cmd_simulate, cmd_train)
+from ._commands import cmd_evaluate, cmd_reproduce, cmd_rollout, cmd_simulate, cmd_train
 from .._errors import MetriplexError
 from ..integrate import ROOT_FINDERS, SCHEMES
 
-#: ``_config_from_args`` and ``_train_summary`` live in _commands; importable from here as before.
-__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "_config_from_args", "_train_summary",
-           "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
+__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
            "cmd_train", "main"]
 
 

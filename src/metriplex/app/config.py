@@ -15,7 +15,7 @@ import math
 from typing import Any
 
 from .._errors import MetriplexError, expect_integer
-from .._solve._implicit import _Implicit
+from .._solve._implicit import _AbstractImplicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
 from ..io import read_matrix
 from ..structure.constant import ConstantFriction, ConstantPoisson
@@ -165,8 +165,8 @@ def scheme_from_name(name: str, *, solver: str | None = None) -> AbstractScheme:
     cls = SCHEMES[name]
     if solver is None:
         return cls()
-    if not issubclass(cls, _Implicit):
-        implicit = ", ".join(k for k, c in SCHEMES.items() if issubclass(c, _Implicit))
+    if not issubclass(cls, _AbstractImplicit):
+        implicit = ", ".join(k for k, c in SCHEMES.items() if issubclass(c, _AbstractImplicit))
         raise MetriplexError(
             f"--solver applies to the implicit schemes ({implicit}); "
             f"{name!r} is explicit. Leave --solver out."

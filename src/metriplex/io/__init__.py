@@ -29,11 +29,8 @@ Where each thing lives; a module imports only from the groups above its own:
 imports nothing from io.
 """
 
-from . import _files
 from ._csv import read_csv
 from ._files import (
-    _json_default,
-    _strict,
     atomic_write,
     check_output_file,
     check_output_folder,
@@ -49,9 +46,4 @@ from ._registry import read, trajectory_suffixes, write
 __all__ = ["FORMAT_VERSION", "MAGIC", "MODEL_DTYPES", "atomic_write", "check_output_file",
            "check_output_folder", "load", "natural_key", "read", "read_csv", "read_hdf5",
            "read_header", "read_mat", "read_mat_operators", "read_matrix", "read_npz", "save",
-           "trajectory_suffixes", "write", "write_hdf5", "write_json", "write_mat",
-           "_json_default", "_strict"]
-
-#: The ``os`` module that the output checks call: tests make a folder unwritable by patching
-#: ``metriplex.io.os.access``.
-os = _files.os
+           "trajectory_suffixes", "write", "write_hdf5", "write_json", "write_mat"]

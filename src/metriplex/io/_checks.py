@@ -8,6 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse
 
 from .._errors import MetriplexError
 from ..data import Trajectories
@@ -77,7 +78,7 @@ def _real(v, what: str, where: str) -> np.ndarray:
             f"{what} in {where} is a {v.cls}, which metriplex does not read; store it as a "
             "plain double array."
         )
-    if hasattr(v, "toarray"):  # a MATLAB sparse matrix
+    if scipy.sparse.issparse(v):  # a MATLAB sparse matrix
         v = v.toarray()
     a = np.asarray(v)
     if a.dtype.kind == "c":
