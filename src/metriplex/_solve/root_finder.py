@@ -41,17 +41,49 @@ class AbstractRootFinder(eqx.Module):
 # -- the two methods, each for a batch of steps; the root finders below run them ----------------
 
 
-class _FixedPointIteration(optx.FixedPointIteration):
-    """Optimistix's fixed-point iteration, with its error estimate in the state's dtype.
+class _FixedPointIteration(optx.AbstractFixedPointSolver):
+    """Optimistix's :class:`optimistix.FixedPointIteration` (``inner``), wrapped so that its
+    error estimate starts in the state's dtype.
 
     Upstream starts the estimate as ``jnp.array(inf)``, which is float64 when x64 is enabled;
-    a float32 state then changes the loop carry's dtype and the solve fails to trace.
+    a float32 state then changes the loop carry's dtype and the solve fails to trace. The
+    upstream class is final, so this wraps it instead of subclassing it.
     """
+
+    inner: optx.FixedPointIteration
+
+    def __init__(self, rtol: float, atol: float) -> None:
+        self.inner = optx.FixedPointIteration(rtol=rtol, atol=atol)
+
+    @property
+    def rtol(self) -> float:
+        return self.inner.rtol
+
+    @property
+    def atol(self) -> float:
+        return self.inner.atol
+
+    @property
+    def norm(self) -> Callable[[Any], Any]:
+        return self.inner.norm
 
     def init(self, fn: Callable[..., Any], y: State, args: Any, options: dict[str, Any],
              f_struct: Any, aux_struct: Any, tags: frozenset[object]) -> Any:
-        state = super().init(fn, y, args, options, f_struct, aux_struct, tags)
+        state = self.inner.init(fn, y, args, options, f_struct, aux_struct, tags)
         return type(state)(jnp.array(jnp.inf, jnp.result_type(y)))
+
+    def step(self, fn: Callable[..., Any], y: State, args: Any, options: dict[str, Any],
+             state: Any, tags: frozenset[object]) -> tuple[State, Any, Any]:
+        return self.inner.step(fn, y, args, options, state, tags)
+
+    def terminate(self, fn: Callable[..., Any], y: State, args: Any, options: dict[str, Any],
+                  state: Any, tags: frozenset[object]) -> tuple[jax.Array, Any]:
+        return self.inner.terminate(fn, y, args, options, state, tags)
+
+    def postprocess(self, fn: Callable[..., Any], y: State, aux: Any, args: Any,
+                    options: dict[str, Any], state: Any, tags: frozenset[object],
+                    result: Any) -> tuple[State, Any, dict[str, Any]]:
+        return self.inner.postprocess(fn, y, aux, args, options, state, tags, result)
 
 
 def _newton(update, x0, guess, args, rtol, atol, max_steps):
