@@ -45,3 +45,19 @@ def test_a_scheme_without_a_name_and_summary_cannot_be_made():
 
     with pytest.raises(TypeError):
         Nameless()
+
+
+def test_presets_experiments_and_formats_in_the_help_come_from_their_tables(monkeypatch):
+    from metriplex.app.experiments import EXPERIMENTS
+    from metriplex.io._registry import FORMATS
+
+    assert set(config.PRESETS) == set(EXPERIMENTS)  # one table: an experiment owns its preset
+    train, simulate = _help("train", monkeypatch), _help("simulate", monkeypatch)
+    reproduce = _help("reproduce", monkeypatch)
+    assert " | ".join(config.PRESETS) in train and " | ".join(EXPERIMENTS) in reproduce
+    for suffixes, _, _, layout in FORMATS:
+        for suffix in suffixes:
+            assert suffix in simulate and suffix in _help("rollout", monkeypatch)
+        assert re.sub(r"\s+", " ", layout) in train  # the data format, in the epilog
+    for name in config.FEATURES:
+        assert name in train

@@ -15,6 +15,9 @@ from typing import Any, NoReturn
 from ._commands import cmd_evaluate, cmd_reproduce, cmd_rollout, cmd_simulate, cmd_train
 from .._errors import MetriplexError
 from ..integrate import ROOT_FINDERS, SCHEMES
+from ..io._registry import layouts_text, suffixes_text
+from ._presets import EXPERIMENTS, PRESETS
+from .config import FEATURES
 
 __all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
            "cmd_train", "main"]
@@ -80,10 +83,12 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help="add a learned quadratic form to the learned E and S networks (a "
                    "second-order Taylor term that extrapolates the forces linearly; off by "
                    "default)")
-    g.add_argument("--features", help="none | pendulum (the paper's invariant features)")
+    g.add_argument("--features", help=" | ".join(("none", *FEATURES))
+                   + " (invariant features of the state; default none)")
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
                    f"energy, entropy, friction (default {d.features_for})")
-    g.add_argument("--scheme", help=_scheme_help("training residual scheme: ", "default cn"))
+    g.add_argument("--scheme", help=_scheme_help("training residual scheme: ",
+                                                         f"default {RunConfig().scheme}"))
     w = p.add_argument_group("loss weights and optimisation")
     w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
     w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,
@@ -172,7 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="system parameter, e.g. --param parameter_set=spnn or --param inertia=10,20,40")
     p.add_argument("--float64", action="store_true", help="integrate in float64")
-    p.add_argument("--out", required=True, help="data file to write: .npz, .csv, .h5 or .mat")
+    p.add_argument("--out", required=True, help=f"data file to write: {suffixes_text()}")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.set_defaults(func=cmd_simulate)
 
@@ -182,8 +187,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="RUN_DIR",
                    help="run folder: model.mpx, config.json, history.json, metrics.json, "
                    "checkpoint.ckpt, figures/")
-    p.add_argument("--preset", help="rigid-body | pendulum-energetic | pendulum-temperature | "
-                   "gas-containers")
+    p.add_argument("--preset", help=" | ".join(PRESETS) + " (a reference experiment's "
+                   "settings)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run in --out "
                    "(with the same DATA, --dt, trajectories and options; others are refused)")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
@@ -207,7 +212,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
     p.add_argument("data", metavar="DATA", help="trajectories to predict (format below)")
     p.add_argument("--out", required=True,
-                   help="predictions, in the data format: .npz, .csv, .h5 or .mat")
+                   help=f"predictions, in the data format: {suffixes_text()}")
     p.add_argument("--scheme", help=_scheme_help("", "default: the scheme the run was trained "
                                                  "with"))
     p.add_argument("--solver", choices=tuple(ROOT_FINDERS), help=_solver_help())
@@ -249,7 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("reproduce", help="run a reference experiment end to end, with figures")
     p.add_argument("experiment", metavar="EXPERIMENT",
-                   help="rigid-body | pendulum-energetic | pendulum-temperature | gas-containers")
+                   help=" | ".join(EXPERIMENTS))
     p.add_argument("--quick", action="store_true", help="reduced size (about two minutes)")
     p.add_argument("--out", default=None, help="output folder (default runs/EXPERIMENT)")
     p.add_argument("--degeneracy", default=None,
@@ -270,12 +275,9 @@ _DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), 
        "the file's times or supplying them (e.g. a .mat time vector that does not fit the "
        "snapshots)")
 
-DATA_FORMAT = """\
-data format: one row per observed state, in one of
-  .csv  columns trajectory,t,<name_1>,...,<name_n> (integer trajectory id, time, the state)
-  .npz  arrays trajectory (N,), t (N,), x (N, n), optional names (n,)
-  .h5   one group per trajectory, each with datasets t (T,) and x (T, n)
-  .mat  snapshots (trajectories x variables x snapshots) with a time vector or step
+DATA_FORMAT = f"""\
+data format: the observed states, in the layout of their file's suffix
+{layouts_text()}
 Trajectories may be ragged and unevenly sampled; samples within a trajectory are in time order.
 With --dt STEP the file's times are not read: each trajectory gets t = 0, STEP, 2*STEP, ...
 """

@@ -17,17 +17,34 @@ from ._hdf5 import read_hdf5, write_hdf5
 from ._mat import read_mat, write_mat
 from ._npz import read_npz, write_npz
 
-#: Each format: its suffixes (lower case), its reader and its writer.
-FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories], Callable[..., None]], ...] = (
-    ((".npz",), read_npz, write_npz),
-    ((".csv",), read_csv, write_csv),
-    ((".h5", ".hdf5"), read_hdf5, write_hdf5),
-    ((".mat",), read_mat, write_mat),
+#: Each format: its suffixes (lower case), its reader, its writer and its layout in one line
+#: (what the command line's help says of it).
+FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories], Callable[..., None], str],
+               ...] = (
+    ((".npz",), read_npz, write_npz,
+     "arrays trajectory (N,), t (N,), x (N, n), optional names (n,)"),
+    ((".csv",), read_csv, write_csv,
+     "columns trajectory,t,<name_1>,...,<name_n> (integer trajectory id, time, the state)"),
+    ((".h5", ".hdf5"), read_hdf5, write_hdf5,
+     "one group per trajectory, each with datasets t (T,) and x (T, n)"),
+    ((".mat",), read_mat, write_mat,
+     "snapshots (trajectories x variables x snapshots) with a time vector or step"),
 )
 
 #: Suffix -> reader and suffix -> writer, from :data:`FORMATS`.
-READERS: dict[str, Callable[..., Trajectories]] = {s: r for ss, r, _ in FORMATS for s in ss}
-WRITERS: dict[str, Callable[..., None]] = {s: w for ss, _, w in FORMATS for s in ss}
+READERS: dict[str, Callable[..., Trajectories]] = {s: r for ss, r, _, _ in FORMATS for s in ss}
+WRITERS: dict[str, Callable[..., None]] = {s: w for ss, _, w, _ in FORMATS for s in ss}
+
+
+def suffixes_text() -> str:
+    """Every suffix of :data:`FORMATS` in a phrase: ``".npz, .csv, .h5, .hdf5 or .mat"``."""
+    suffixes = [s for ss, _, _, _ in FORMATS for s in ss]
+    return ", ".join(suffixes[:-1]) + " or " + suffixes[-1]
+
+
+def layouts_text() -> str:
+    """One line per format of :data:`FORMATS`: its suffixes and its layout."""
+    return "\n".join(f"  {'/'.join(ss):<11} {layout}" for ss, _, _, layout in FORMATS)
 
 
 def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:

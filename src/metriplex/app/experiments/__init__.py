@@ -27,6 +27,7 @@ import numpy as np
 from .. import plots
 from ..._errors import MetriplexError
 from ..._model import with_dtype
+from .._presets import EXPERIMENTS, Experiment, Size
 from ..config import PRESETS, RunConfig, preset, scheme_from_name
 
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
@@ -37,78 +38,6 @@ from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
 from ..runs import train_run
-
-
-@dataclasses.dataclass(frozen=True)
-class Size:
-    """The data and training sizes of one version (full or quick) of an experiment: training
-    ``trajectories`` of ``steps`` steps, ``train_steps`` optimiser steps, and ``test_trajectories``
-    unseen ones of ``test_steps`` steps."""
-    trajectories: int
-    steps: int
-    train_steps: int
-    test_trajectories: int
-    test_steps: int
-
-
-@dataclasses.dataclass(frozen=True)
-class Experiment:
-    """One reference experiment: the system, the data sizes, the training preset, the bars."""
-
-    name: str
-    system: str
-    dt: float
-    full: Size
-    quick: Size
-    horizon: float | None  # report the error up to this time (None: the whole test horizon)
-    bars: dict[str, float]
-    system_params: dict[str, Any] = dataclasses.field(default_factory=dict)
-    overrides: dict[str, Any] = dataclasses.field(default_factory=dict)
-    rollout_scheme: str = "cn"
-    description: str = ""
-
-
-EXPERIMENTS: dict[str, Experiment] = {
-    e.name: e
-    for e in (
-        Experiment(
-            "rigid-body", "rigid-body", 2 * math.pi / 100,
-            full=Size(5, 10_000, 10_000, 5, 1000),
-            quick=Size(20, 250, 2000, 2, 200),
-            horizon=None,
-            bars={"rollout_error_mean": 1e-2, "jacobi_residual_relative": 1e-3},
-            description="learn L and E, no prior (Jacobi penalty on); paper: 5 x 10 000 steps",
-        ),
-        Experiment(
-            "pendulum-energetic", "pendulum-energetic", 0.1,
-            full=Size(100, 400, 60_000, 10, 400),
-            quick=Size(40, 100, 5000, 4, 100),
-            horizon=10.0,
-            bars={"rollout_error_to_horizon_mean": 5e-2,
-                  "energy_relative_drift_gauge_fixed": 1e-3, "entropy_min_step": 0.0},
-            rollout_scheme="discrete-gradient",
-            description="L canonical, S = s1 + s2; learn E and M (paper's featurisation)",
-        ),
-        Experiment(
-            "pendulum-temperature", "pendulum-temperature", 0.04,
-            full=Size(40, 1000, 6000, 10, 250),
-            quick=Size(20, 250, 2000, 2, 250),
-            horizon=10.0,
-            bars={"rollout_error_to_horizon_mean": 1e-1,
-                  "energy_relative_drift_gauge_fixed": 1e-3},
-            rollout_scheme="discrete-gradient",
-            description="learn L, M, E and S in (q, p, theta); paper: 40 x 1000 steps",
-        ),
-        Experiment(
-            "gas-containers", "gas-containers", 0.02,
-            full=Size(80, 400, 30_000, 20, 400),
-            quick=Size(16, 200, 6000, 4, 200),
-            horizon=None,
-            bars={"rollout_error_mean": 2e-2},
-            description="L canonical, S = S1 + S2; learn E and M (100 trajectories, 80 train)",
-        ),
-    )
-}
 
 
 def _check_name(name: str) -> Experiment:
