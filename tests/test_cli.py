@@ -191,8 +191,16 @@ def test_unknown_or_reordered_columns(oscillator_run, tmp_path):
 def test_help_lists_commands():
     res = run("--help")
     assert res.returncode == 0
-    for cmd in ("simulate", "train", "rollout", "evaluate", "reproduce"):
+    for cmd in ("generate", "simulate", "train", "rollout", "evaluate", "reproduce"):
         assert cmd in res.stdout
+
+
+def test_generate_and_its_former_name_simulate_write_the_same_data(tmp_path):
+    args = ("oscillator-bath", "--trajectories", "2", "--steps", "5", "--dt", "0.02")
+    assert run("generate", *args, "--out", tmp_path / "a.npz").returncode == 0
+    assert run("simulate", *args, "--out", tmp_path / "b.npz").returncode == 0
+    a, b = mx.read(tmp_path / "a.npz"), mx.read(tmp_path / "b.npz")
+    assert np.array_equal(a.x, b.x) and np.array_equal(a.t, b.t)
 
 
 def test_cli_solver_choices_match_the_library():

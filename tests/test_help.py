@@ -13,7 +13,7 @@ def _subparsers() -> dict[str, argparse.ArgumentParser]:
     return dict(sub.choices)
 
 
-@pytest.mark.parametrize("command", ["simulate", "train", "rollout", "evaluate", "reproduce"])
+@pytest.mark.parametrize("command", ["generate", "simulate", "train", "rollout", "evaluate", "reproduce"])
 def test_every_option_and_argument_has_a_description(command):
     p = _subparsers()[command]
     silent = [a.option_strings[0] if a.option_strings else a.dest for a in p._actions

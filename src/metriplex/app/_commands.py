@@ -53,8 +53,9 @@ def _positive_finite(value, option: str) -> None:
         raise MetriplexError(f"{option} must be a positive finite number; got {value}.")
 
 
-def cmd_simulate(args: argparse.Namespace) -> None:
-    """Write trajectories of a built-in system (``metriplex simulate``): from ``--trajectories``
+def cmd_generate(args: argparse.Namespace) -> None:
+    """Write trajectories of a built-in system (``metriplex generate``, formerly ``metriplex
+    simulate``, which still works): from ``--trajectories``
     initial states drawn with ``--seed``, ``--steps`` steps of ``--dt`` each, to ``--out``."""
     from .. import systems
     from .config import check_seed
@@ -72,6 +73,10 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     )
     write(out, data)
     print(f"wrote {len(data)} trajectories x {args.steps + 1} states of {args.system} to {out}")
+
+
+#: The former name of :func:`cmd_generate` (``metriplex simulate``).
+cmd_simulate = cmd_generate
 
 
 def _params(items):

@@ -12,14 +12,15 @@ import re
 import sys
 from typing import Any, NoReturn
 
-from ._commands import cmd_evaluate, cmd_reproduce, cmd_rollout, cmd_simulate, cmd_train
+from ._commands import (cmd_evaluate, cmd_generate, cmd_reproduce, cmd_rollout, cmd_simulate,
+                        cmd_train)
 from .._errors import MetriplexError
 from ..integrate import ROOT_FINDERS, SCHEMES
 from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
 from .config import FEATURES
 
-__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_simulate",
+__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_generate", "cmd_simulate",
            "cmd_train", "main"]
 
 
@@ -163,7 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("simulate", help="generate trajectories of a built-in system",
+    p = sub.add_parser("generate", aliases=["simulate"],
+                       help="generate trajectories of a built-in system",
                        description=_systems_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("system", metavar="SYSTEM", help="a built-in system (listed above)")
     p.add_argument("--trajectories", type=int, required=True,
@@ -179,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--float64", action="store_true", help="integrate in float64")
     p.add_argument("--out", required=True, help=f"data file to write: {suffixes_text()}")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
-    p.set_defaults(func=cmd_simulate)
+    p.set_defaults(func=cmd_generate)
 
     p = sub.add_parser("train", help="learn a GENERIC model from trajectory data",
                        epilog=DATA_FORMAT, formatter_class=argparse.RawDescriptionHelpFormatter)

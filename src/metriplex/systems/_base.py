@@ -101,7 +101,7 @@ class System(abc.ABC):
         return ", ".join(f"{k}={_format(v)}" for k, v in self.parameters().items())
 
     def help_text(self) -> str:
-        """Description, parameters and published settings, for ``metriplex simulate --help``."""
+        """Description, parameters and published settings, for ``metriplex generate --help``."""
         d = self.defaults
         return (
             f"{self.name}: {self.description} Parameters: {self.parameter_summary()}. "

@@ -1,4 +1,4 @@
-"""The built-in systems by name (what ``metriplex simulate SYSTEM`` accepts)."""
+"""The built-in systems by name (what ``metriplex generate SYSTEM`` accepts)."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def get_system(name: str, **params: Any) -> System:
     if name not in SYSTEMS:
         raise MetriplexError(
             f"unknown system {name!r}; the built-in systems are {', '.join(SYSTEMS)}. "
-            "Run `metriplex simulate --help` for their parameters."
+            "Run `metriplex generate --help` for their parameters."
         )
     system = SYSTEMS[name]
     return system.with_params(**params) if params else system
