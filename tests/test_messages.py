@@ -112,7 +112,10 @@ def nothing_written(folder):
         (["--w-traj", "nan"], r"--w-traj must be a finite number; got nan\.", ("diverged",)),
         (["--weight-decay", "inf"], r"--weight-decay must be a finite number; got inf", ()),
         (["--max-minutes", "nan"], r"--max-minutes must be a finite number; got nan", ()),
-        (["--w-degeneracy-M", "-1e-2"], r"loss weight w_degeneracy_M must be >= 0; got -0\.01",
+        (["--w-degeneracy-M", "-1e-2"],
+         r"--w-degeneracy-M \(a loss weight\) must be >= 0; got -0\.01", ()),
+        (["--features", "pendulum"], r"--features pendulum does not fit these data: feature "
+         r"indices must lie in \[0, 2\] for a state of 3 variables; .* leave --features out",
          ()),
         (["--batch-size", "0"], r"--batch-size must be >= 1 \(pairs per optimiser step\); got 0",
          ()),
@@ -161,6 +164,16 @@ def test_simulate_seed(tmp_path):
     res = run("simulate", "rigid-body", "--trajectories", "1", "--steps", "2", "--dt", "0.1",
               "--seed", "-1", "--out", tmp_path / "s.npz")
     refused(res, r"--seed must be an integer from 0 to 4294967295; got -1\.")
+    assert not (tmp_path / "s.npz").exists()
+
+
+def test_generate_a_step_too_long_for_the_system(tmp_path):
+    # 1e11 substeps of the system's accuracy limit would overflow the compiled loop's counter.
+    res = run("generate", "rigid-body", "--trajectories", "2", "--steps", "5", "--dt", "1e9",
+              "--out", tmp_path / "s.npz")
+    refused(res, r"dt = 1e\+09 needs 1e\+11 substeps per recorded step: the rigid-body system "
+                 r"is integrated in substeps of at most 0\.01 .* Give a dt of at most 10000 "
+                 r"\(--dt\)")
     assert not (tmp_path / "s.npz").exists()
 
 
@@ -403,3 +416,14 @@ def test_resume_without_config_json(files, tmp_path):
 
 def test_no_command():
     refused(run(), r"metriplex: error: the following arguments are required: COMMAND")
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs Linux's /proc")
+def test_a_folder_that_os_access_calls_writable_but_is_not():
+    # /proc says it is writable to root through os.access but refuses new files: the probe file
+    # finds out before any work, where the atomic write found out after all of it.
+    from metriplex.io import check_output_file
+
+    with pytest.raises(mx.MetriplexError, match=r"cannot write --out '/proc/m\.json': the "
+                                                r"folder '/proc' is not writable"):
+        check_output_file("/proc/m.json")

@@ -253,6 +253,11 @@ def test_resume_refuses_other_data_or_another_split(trained, tmp_path):
             r"on 3,5\. .*--split RUN_DIR")
     refused(run("train", data_file, "--out", trained, *same),
             r"it trained on 0-3 and validated on 4-5; this command trains on")
+    lr = before["config"]["lr"]
+    refused(run("train", data_file, "--out", trained, *same, "--trajectories", "0-5",
+                "--validation-ids", "4,5", "--lr", str(lr / 10)),
+            rf"--resume needs the options of the interrupted run, but they differ: --lr was "
+            rf"{lr!r}, given {lr / 10!r}\. Repeat the original options")
     assert json.loads((trained / "config.json").read_text()) == before  # untouched
 
 

@@ -226,7 +226,13 @@ def validate(config: RunConfig, n: int) -> None:
             f"--features must be 'none' or one of {sorted(FEATURES)}; got {config.features!r}."
         )
     if config.features != "none":
-        FEATURES[config.features].check(n)
+        try:
+            FEATURES[config.features].check(n)
+        except MetriplexError as e:
+            raise MetriplexError(
+                f"--features {config.features} does not fit these data: {e} Those features "
+                f"are made for the system they are named after; leave --features out (none) "
+                f"for other data.") from None
     _feature_blocks(config)
     scheme_from_name(config.scheme)
     if config.jacobi_samples is not None and config.jacobi_samples < 1:
@@ -291,7 +297,8 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--validation must lie in [0, 1); got {config.validation}.")
     for name in ("w_traj", "w_degeneracy_L", "w_degeneracy_M", "w_jacobi", "w_temperature"):
         if getattr(config, name) is not None and getattr(config, name) < 0:
-            raise MetriplexError(f"loss weight {name} must be >= 0; got {getattr(config, name)}.")
+            raise MetriplexError(f"--{name.replace('_', '-')} (a loss weight) must be >= 0; "
+                                 f"got {getattr(config, name)}.")
     check_thermal_options(config)
 
 

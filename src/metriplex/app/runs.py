@@ -66,6 +66,11 @@ def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
     out.mkdir(parents=True, exist_ok=True)
 
 
+#: Options a resumed run may change: the wall-time cap (``--max-minutes``), which changes no
+#: step of the training.
+RESUME_MAY_CHANGE = ("max_minutes",)
+
+
 def train_run(
     data: Trajectories,
     config: RunConfig,
@@ -169,12 +174,15 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
         saved = RunConfig.from_json(stored)
-        if saved != config:
-            diff = {k: (getattr(saved, k), getattr(config, k)) for k in saved.to_json()
-                    if getattr(saved, k) != getattr(config, k)}
+        diff = [k for k in saved.to_json() if k not in RESUME_MAY_CHANGE
+                and getattr(saved, k) != getattr(config, k)]
+        if diff:
+            said = "; ".join(f"--{k.replace('_', '-')} was {getattr(saved, k)!r}, given "
+                             f"{getattr(config, k)!r}" for k in diff)
             raise MetriplexError(
-                f"--resume needs the configuration of the interrupted run; these differ "
-                f"(saved, given): {diff}. Repeat the original options."
+                f"--resume needs the options of the interrupted run, but they differ: {said}. "
+                "Repeat the original options (config.json in the run folder lists them), or "
+                "start a new run (--overwrite)."
             )
     train, valid = split_trajectories(data, config, trajectories=trajectories,
                                       validation_ids=validation_ids)

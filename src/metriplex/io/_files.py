@@ -12,6 +12,7 @@ import contextlib
 import json
 import os
 import secrets
+import tempfile
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -96,12 +97,26 @@ def _check_writable_folder(folder: Path, target: Path, option: str) -> None:
             f"Choose another {option}."
         )
     kw = {"effective_ids": True} if os.access in os.supports_effective_ids else {}
-    if not os.access(existing, os.W_OK | os.X_OK, **kw):
+    if not os.access(existing, os.W_OK | os.X_OK, **kw) or not _can_create_in(existing):
         raise MetriplexError(
             f"cannot write {option} {str(target)!r}: the folder {str(existing)!r} is not writable "
             f"(permission denied or a read-only file system). Choose another {option}, or make "
             "that folder writable."
         )
+
+
+def _can_create_in(folder: Path) -> bool:
+    """Whether a file can be created in ``folder``, tried with an empty probe file that is removed
+    at once: ``os.access`` says yes where the file system refuses (``/proc``, some network and
+    read-only mounts, or root in a folder without write permission)."""
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".metriplex-probe-", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return True
 
 
 def check_output_file(path: str | os.PathLike, *, overwrite: bool = False, option: str = "--out",

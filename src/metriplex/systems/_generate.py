@@ -23,6 +23,11 @@ from .pendulum import PendulumEnergetic
 from .pendulum_temperature import PendulumTemperature
 
 
+#: The most substeps one recorded step of :func:`generate` may take (their count is a loop
+#: bound in the compiled rollout).
+MAX_SUBSTEPS = 1_000_000
+
+
 class Substeps(AbstractScheme):
     r"""``count`` steps of ``inner``, each of size :math:`h = \Delta t/\text{count}`, per step.
 
@@ -128,7 +133,18 @@ def generate(
     dt = float(dt)
     if substeps is None:
         substeps = max(1, math.ceil(dt / system.max_substep - 1e-9))
+        if substeps > MAX_SUBSTEPS:
+            raise MetriplexError(
+                f"dt = {dt:g} needs {substeps:.3g} substeps per recorded step: the "
+                f"{system.name} system is integrated in substeps of at most "
+                f"{system.max_substep:g} (its accuracy limit), and at most {MAX_SUBSTEPS:,} "
+                f"substeps per step are allowed. Give a dt of at most "
+                f"{MAX_SUBSTEPS * system.max_substep:g} (--dt), in the system's time unit."
+            )
     substeps = _positive_int(substeps, "substeps")
+    if substeps > MAX_SUBSTEPS:
+        raise MetriplexError(
+            f"`substeps` must be at most {MAX_SUBSTEPS:,} per recorded step; got {substeps}.")
     if x0 is None:
         x0 = system.sample_initial(_positive_int(trajectories, "trajectories"), seed=seed)
     x0 = np.asarray(x0, dtype=np.float64)
