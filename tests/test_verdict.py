@@ -339,3 +339,17 @@ def test_a_time_step_that_decides_the_prediction_gives_cannot_tell():
     del report["step_sensitivity"]
     assert "step_sensitivity" not in _reasons(verdict(truth, coarse, report=report,
                                                       reference=reference))
+
+
+def test_too_little_data_to_compare_residuals_gives_cannot_tell():
+    # The true model on one trajectory of 9 states: the reference holds out its last 3 states,
+    # 2 pairs, on which a residual comparison decides nothing (#14: "too little data").
+    system = systems.get_system("oscillator-bath")
+    data = systems.generate(system, trajectories=1, steps=8, seed=3)
+    report = mx.evaluate(system.model, data, scheme=mx.RK4())
+    v = verdict(system.model, data, report=report, steps=50, width=8)
+    held = _reasons(v)["held_out_pairs"]
+    assert v["outcome"] == CANNOT_TELL and held["passed"] is False and held["value"] == 2
+    assert "only 2 pairs are held out from the reference's training (1 trajectories" in \
+        held["note"] and "too little data" in held["note"]
+    assert "held_out_pairs = 2" in v["statement"]

@@ -35,10 +35,18 @@ def _fmt(v) -> str:
 
 
 def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool | None,
-                      stopped: str | None, th) -> list[dict[str, Any]]:
-    """``rollout_failures``, ``training_converged`` and, where ``report`` measured it,
-    ``step_sensitivity``: is the evidence along the structured model's rollouts sound?"""
-    reasons = []
+                      stopped: str | None, th, held_out: int = 0) -> list[dict[str, Any]]:
+    """``held_out_pairs``, ``rollout_failures``, ``training_converged`` and, where ``report``
+    measured it, ``step_sensitivity``: is the evidence sound? ``held_out``: the number of pairs
+    that the black-box reference did not train on, where both models are compared."""
+    enough = held_out >= th.held_out_pairs
+    reasons = [_reason(
+        "held_out_pairs", held_out, th.held_out_pairs, enough, CANNOT_TELL,
+        f"{held_out} pairs held out from the reference's training, on which both models are "
+        "compared" if enough else
+        f"only {held_out} pairs are held out from the reference's training ({trajectories} "
+        "trajectories in the data; a fifth of them, or the last fifth of a single one, is held "
+        "out): too little data to compare residuals on; give more or longer trajectories")]
     k = int(report.get("trajectories", trajectories))
     n_failed = int(report.get("rollout_failures", 0))
     reasons.append(_reason(
@@ -148,8 +156,11 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any],
             "entropy_production_negative_fraction", "no rollout ran two steps"))
     else:
         ent_pass = frac <= th.entropy_production
+        n_failed, k = int(report.get("rollout_failures", 0)), report.get("trajectories")
         ent_note = ("fraction of the states along the structured model's rollouts where its own "
                     "flow decreases its entropy"
+                    + ("" if not n_failed else f" (up to where they failed: {n_failed} of {k} "
+                       "failed, so only the states before the failures are counted)")
                     + ("" if ent_pass else ": a second-law violation of the fitted model"))
     reasons.append(_reason("entropy_production", frac, th.entropy_production, ent_pass,
                            CANNOT_TELL, ent_note))

@@ -32,75 +32,80 @@ networks work in those units too. The **residual ratio** is
 ``passed`` is ``None`` when a check does not apply; ``effect`` is the outcome a failed check
 leads to). The limits are in :class:`Thresholds`; what each means:
 
-======================== ============== ================================================
-name                     limit          meaning
-======================== ============== ================================================
-``rollout_failures``     0              a rollout of the structured model from a data
-                                        trajectory's first state blew up or an implicit
-                                        step did not converge: its rollout figures are
-                                        incomplete (cannot tell)
-``training_converged``   true           training stopped on a plateau, not on a step or
-                                        time cap: a model still improving says little
-                                        (cannot tell; unknown without a history)
-``step_sensitivity``     0.1            refining the time step 4x changes more than 10%
-                                        of the structured model's predicted motion
-                                        (:func:`metriplex.diagnostics.step_sensitivity`):
-                                        its predictions belong to its scheme at the data's
-                                        step, not to a vector field (cannot tell; only
-                                        where the report measured it)
-``reference_residual``   0.3            the black box leaves more than 30% of the held-out
-                                        rates (9% of their power) unexplained: too few
-                                        trajectories to generalise from, noise, a coarse
-                                        time step or a short reference training dominate,
-                                        so a residual comparison blames nobody
-                                        (cannot tell; not needed when the structured
-                                        model's own residual is within the tolerance)
-``residual_ratio``       2              the structured model leaves more than twice the
-                                        residual of the reference (four times its power),
-                                        where residuals under the tolerance (3% of the
-                                        rates) count as the tolerance: below it,
-                                        differences are what training budgets decide
-                                        (not consistent)
-``degeneracy_L_gradS``   0.1            :math:`|L\nabla S|/(|L|_F|\nabla S|)` in
-                                        standardised coordinates, 0 when exact; an
-                                        antisymmetric L reaches at most
-                                        :math:`1/\sqrt2 \approx 0.71` (no degeneracy at all)
-                                        (cannot tell)
-``degeneracy_M_gradE``   0.1            :math:`|M\nabla E|/(|M|_F|\nabla E|)`, 0 exact, at
-                                        most 1 (cannot tell)
-``jacobi``               0.1            :math:`|J|/(3|T|)`: 0 for a Poisson bivector, 1 when
-                                        the three cyclic terms do not cancel at all; an
-                                        untrained ``SkewMLPPoisson`` gives 0.2–0.3 for
-                                        n = 3 and about 0.5 for n = 5–8 (cannot tell)
-``entropy_production``   0.01           the fraction of the states along the structured
-                                        model's rollouts where its own flow decreases its
-                                        entropy by more than 1% of the fastest rate the
-                                        state's speed allows
-                                        (:func:`metriplex.diagnostics.
-                                        entropy_production_negative_fraction`); exactly 0
-                                        for a GENERIC model (cannot tell)
-``friction_psd``         1e-5           the most negative eigenvalue of the standardised
-                                        :math:`M` relative to its largest: M must be
-                                        positive semi-definite, up to float32 rounding
-                                        (cannot tell)
-``poisson_antisymmetry`` 1e-5           :math:`|L + L^\top|/|L|`, up to rounding
-                                        (cannot tell)
-``temperatures``         0.01           where S is a sum of entropy variables, the
-                                        fraction of the data's states and entropies where
-                                        the learned temperature
-                                        :math:`\partial E/\partial s_i` is negative:
-                                        entropy production then feeds the motion, which
-                                        no physical system does (cannot tell; ``passed``
-                                        is ``None`` for any other entropy)
-``reversible_share``     0.01 (least)   the share of the standardised motion at the
-                                        data's states that :math:`L\nabla E` drives;
-                                        below it friction carries the motion, which any
-                                        flow whose entropy grows admits, so the fit does
-                                        not identify E (0.68–1 for every true system of
-                                        the zoo and the reference experiments with
-                                        :math:`L \ne 0`; cannot tell; ``passed`` is
-                                        ``None`` where L = 0)
-======================== ============== ================================================
+========================== ============== ================================================
+name                       limit          meaning
+========================== ============== ================================================
+``held_out_pairs``         10             pairs the black-box reference did not train on
+                                          (a fifth of the trajectories, or the last fifth
+                                          of a single one), where both models are
+                                          compared: fewer are too little data for a
+                                          residual comparison (cannot tell)
+``rollout_failures``       0              a rollout of the structured model from a data
+                                          trajectory's first state blew up or an implicit
+                                          step did not converge: its rollout figures are
+                                          incomplete (cannot tell)
+``training_converged``     true           training stopped on a plateau, not on a step or
+                                          time cap: a model still improving says little
+                                          (cannot tell; unknown without a history)
+``step_sensitivity``       0.1            refining the time step 4x changes more than 10%
+                                          of the structured model's predicted motion
+                                          (:func:`metriplex.diagnostics.step_sensitivity`):
+                                          its predictions belong to its scheme at the data's
+                                          step, not to a vector field (cannot tell; only
+                                          where the report measured it)
+``reference_residual``     0.3            the black box leaves more than 30% of the held-out
+                                          rates (9% of their power) unexplained: too few
+                                          trajectories to generalise from, noise, a coarse
+                                          time step or a short reference training dominate,
+                                          so a residual comparison blames nobody
+                                          (cannot tell; not needed when the structured
+                                          model's own residual is within the tolerance)
+``residual_ratio``         2              the structured model leaves more than twice the
+                                          residual of the reference (four times its power),
+                                          where residuals under the tolerance (3% of the
+                                          rates) count as the tolerance: below it,
+                                          differences are what training budgets decide
+                                          (not consistent)
+``degeneracy_L_gradS``     0.1            :math:`|L\nabla S|/(|L|_F|\nabla S|)` in
+                                          standardised coordinates, 0 when exact; an
+                                          antisymmetric L reaches at most
+                                          :math:`1/\sqrt2 \approx 0.71` (no degeneracy at all)
+                                          (cannot tell)
+``degeneracy_M_gradE``     0.1            :math:`|M\nabla E|/(|M|_F|\nabla E|)`, 0 exact, at
+                                          most 1 (cannot tell)
+``jacobi``                 0.1            :math:`|J|/(3|T|)`: 0 for a Poisson bivector, 1 when
+                                          the three cyclic terms do not cancel at all; an
+                                          untrained ``SkewMLPPoisson`` gives 0.2–0.3 for
+                                          n = 3 and about 0.5 for n = 5–8 (cannot tell)
+``entropy_production``     0.01           the fraction of the states along the structured
+                                          model's rollouts where its own flow decreases its
+                                          entropy by more than 1% of the fastest rate the
+                                          state's speed allows
+                                          (:func:`metriplex.diagnostics.
+                                          entropy_production_negative_fraction`); exactly 0
+                                          for a GENERIC model (cannot tell)
+``friction_psd``           1e-5           the most negative eigenvalue of the standardised
+                                          :math:`M` relative to its largest: M must be
+                                          positive semi-definite, up to float32 rounding
+                                          (cannot tell)
+``poisson_antisymmetry``   1e-5           :math:`|L + L^\top|/|L|`, up to rounding
+                                          (cannot tell)
+``temperatures``           0.01           where S is a sum of entropy variables, the
+                                          fraction of the data's states and entropies where
+                                          the learned temperature
+                                          :math:`\partial E/\partial s_i` is negative:
+                                          entropy production then feeds the motion, which
+                                          no physical system does (cannot tell; ``passed``
+                                          is ``None`` for any other entropy)
+``reversible_share``       0.01 (least)   the share of the standardised motion at the
+                                          data's states that :math:`L\nabla E` drives;
+                                          below it friction carries the motion, which any
+                                          flow whose entropy grows admits, so the fit does
+                                          not identify E (0.68–1 for every true system of
+                                          the zoo and the reference experiments with
+                                          :math:`L \ne 0`; cannot tell; ``passed`` is
+                                          ``None`` where L = 0)
+========================== ============== ================================================
 
 The degeneracy, Jacobi and PSD figures are taken at the data's states in standardised
 coordinates :math:`\tilde x = x/d` (:func:`metriplex.diagnostics.structure_residuals` with the
@@ -157,6 +162,7 @@ class Thresholds:
     residual on its natural 0–1 scale, rounding), not tuned on any data set.
     """
 
+    held_out_pairs: int = 10
     residual_ratio: float = 2.0
     tolerance: float = 0.03
     reference_residual: float = 0.3
@@ -237,7 +243,8 @@ def verdict(
         r_box, rel_box = None, None
 
     # The checks, in the order of the module docstring's table.
-    reasons = _soundness_checks(report, len(data), converged, stopped, th)
+    reasons = _soundness_checks(report, len(data), converged, stopped, th,
+                                held_out=len(pairs.dt) if valid is not None else 0)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th)
     reasons += compared
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
@@ -245,8 +252,8 @@ def verdict(
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
-    sound = {"rollout_failures", "training_converged", "reference_residual",
-             "step_sensitivity"}
+    sound = {"held_out_pairs", "rollout_failures", "training_converged",
+             "reference_residual", "step_sensitivity"}
     if any(r["name"] in sound for r in failed) or (ratio is None):
         outcome = CANNOT_TELL
     elif any(r["name"] == "residual_ratio" for r in failed):
