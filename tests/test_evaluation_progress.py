@@ -100,6 +100,9 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
               tmp_path / "fig", "--out", tmp_path / "m.json")
     assert res.returncode == 0, res.stderr
     assert "rollouts:" in res.stderr and "/6 [" in res.stderr, res.stderr  # a bar of 6
+    # and one over what follows them (seconds on large data), naming each phase
+    assert "diagnostics:" in res.stderr and "3/3 [" in res.stderr, res.stderr
+    assert "structure residuals" in res.stderr, res.stderr
     # Three batches, once for the metrics and the figures together; then one rollout of the
     # step check, every interval in four (the data-grid rollout is reused, not repeated).
     assert calls == [(2, 11)] * 3 + [(6, 41)], calls
@@ -110,7 +113,7 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     # --quiet removes the progress, not what the results say (here that this untrained model
     # does not beat predicting no motion): every line left is such a warning.
     assert all(line.startswith("warning: ") for line in quiet.stderr.splitlines()), quiet.stderr
-    assert "rollouts:" not in quiet.stderr
+    assert "rollouts:" not in quiet.stderr and "diagnostics:" not in quiet.stderr
     # rollout too
     res = run("rollout", files / "run", files / "data.npz", "--out", tmp_path / "p.npz")
     assert res.returncode == 0 and "rollouts" in res.stderr, res.stderr

@@ -220,6 +220,17 @@ def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     assert (tmp_path / "run" / "model.mpx").exists()
     h = json.loads((tmp_path / "run" / "history.json").read_text())
     assert h["stopped"].startswith("interrupted at step") and len(h["step"]) >= 1
+    # The run resumes with the same options; only the wall-time cap may change, so that this
+    # step budget of 5e7 ends at once (the budget counts the interrupted run's time too).
+    res = subprocess.run([sys.executable, "-m", "metriplex", "train", str(tmp_path / "d.npz"),
+                          "--out", str(tmp_path / "run"), *opts, "--quiet", "--resume",
+                          "--max-minutes", "0.001"], capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr
+    resumed = json.loads((tmp_path / "run" / "history.json").read_text())
+    assert resumed["step"][:len(h["step"])] == h["step"]  # the interrupted history, continued
+    assert resumed["step"][-1] > h["step"][-1]
+    assert resumed["stopped"].startswith("time budget reached"), resumed["stopped"]
 
 
 def test_cli_divergence_keeps_the_best_model(trained_run, tmp_path):

@@ -119,9 +119,16 @@ def evaluate(
     report["rollout_error_mean"]
     ```
     """
+    from tqdm.auto import tqdm
+
     scheme = CrankNicolson() if scheme is None else scheme
     if rollout is None:
         rollout = rollout_data(model, data, scheme=scheme, progress=progress)
+    # What follows the rollouts takes seconds on large data (compiles, every predicted state
+    # through E and S): one bar over its phases.
+    bar = tqdm(total=3 if step_check else 2, disable=not progress, desc="diagnostics",
+               unit="phase", leave=False)
+    bar.set_postfix_str("energy and entropy along the rollouts")
     out, xs, lengths = rollout
     pred = np.asarray(out.xs, dtype=np.float64)
     ts = np.asarray(out.ts, dtype=np.float64)
@@ -224,10 +231,16 @@ def evaluate(
             float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
             "a rollout failed before the horizon")
         report["constant_prediction_error_to_horizon_mean"] = float(np.mean(const_h))
+    bar.update()
     if step_check:
+        bar.set_postfix_str("step sensitivity")
         sensitivity, why = step_sensitivity(model, data, scheme=scheme, rollout=rollout)
         report["step_sensitivity"] = known(sensitivity, "step_sensitivity", why)
+        bar.update()
+    bar.set_postfix_str("structure residuals")
     structure = structure_residuals(model, data.x)
+    bar.update()
+    bar.close()
     null_reasons.update(structure.pop("null_reasons"))
     report.update(structure)
     report["null_reasons"] = null_reasons

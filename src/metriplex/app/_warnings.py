@@ -59,11 +59,12 @@ def structure_warnings(metrics: dict) -> list[str]:
     negative = metrics.get("entropy_production_negative_fraction")
     if negative is not None and negative > NEGATIVE_PRODUCTION:
         residual = metrics.get("degeneracy_L_gradS_relative")
-        held = "" if residual is None else f" (relative L grad S residual {residual:.2g})"
+        held = "" if residual is None else f" (relative residual {residual:.2g})"
         out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
-                   f"states: L grad S = 0 holds only as a penalty{held}, so this S is not an "
-                   "entropy of the model's flow. --degeneracy exact makes it exact (the "
-                   "entropy then never decreases; it can cost accuracy, see docs/zoo.md).")
+                   f"states: L grad S is not zero{held}, so this S is not an entropy of the "
+                   "model's flow. Where L and S are learned, L grad S = 0 is a penalty by "
+                   "default and --degeneracy exact makes it exact (it can cost accuracy, see "
+                   "docs/zoo.md); where L is given, S must be one of its Casimirs.")
     share = metrics.get("reversible_share")
     if share is not None and share < REVERSIBLE_SHARE:
         out.append(f"warning: the learned energy drives {share:.1e} of the motion (L grad E); "

@@ -326,7 +326,7 @@ def evaluate_run(model: GenericModel, data: Trajectories, *, scheme: str = "cn",
     sch = scheme_from_name(scheme, solver=solver)
     rollout = rollout_data(model, data, scheme=sch, progress=progress)
     report = evaluate(model, data, scheme=sch, horizon=horizon, rollout=rollout,
-                      step_check=step_check)
+                      step_check=step_check, progress=progress)
     if figures is not None:
         report_figures(model, data, figures, scheme=scheme, solver=solver, rollout=rollout,
                        progress=progress)
