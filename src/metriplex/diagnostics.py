@@ -21,7 +21,7 @@ JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import equinox as eqx
 import jax
@@ -77,8 +77,11 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths
 
 
-def _potential_along(model, fn, xs):
-    """``fn`` at every state of ``xs`` (shape ``(K, T, n)``), as ``(K, T)`` float64."""
+def potential_along(model: GenericModel, fn: Callable[[jax.Array], jax.Array],
+                    xs: np.ndarray) -> np.ndarray:
+    """A potential of ``model`` (``fn``: ``model.energy`` or ``model.entropy``) at every state of
+    ``xs`` (shape ``(K, T, n)``, e.g. predicted trajectories), as ``(K, T)`` float64; computed
+    in blocks of states, in the model's dtype."""
     xs = np.asarray(xs)
     flat = jnp.asarray(xs.reshape(-1, xs.shape[-1]), float_dtype(model))
     return np.asarray(_map_states(fn, flat), dtype=np.float64).reshape(xs.shape[:-1])
@@ -153,10 +156,10 @@ def evaluate(
         per_var_den += np.sum(o**2, axis=0)
     completed = any(np.isfinite(e) for e in per_traj)
     n_failed = int(np.sum(failed >= 0))
-    E = _potential_along(model, model.energy, np.nan_to_num(pred))
-    S = _potential_along(model, model.entropy, np.nan_to_num(pred))
+    E = potential_along(model, model.energy, np.nan_to_num(pred))
+    S = potential_along(model, model.entropy, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac, along = [], [], [], [], []
-    E_data = _potential_along(model, model.energy, xs)
+    E_data = potential_along(model, model.energy, xs)
     spread = float(np.ptp(np.concatenate([E_data[k, :T] for k, T in enumerate(lengths)])))
     for k, T in enumerate(lengths):
         if failed[k] >= 0:

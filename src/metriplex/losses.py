@@ -31,10 +31,18 @@ import jax.numpy as jnp
 import jax.random as jr
 
 from ._errors import MetriplexError, count_of, expect_instance
-from ._loss_base import AbstractLossTerm, Batch, Context, Loss, Window  # noqa: F401
+from ._loss_base import AbstractLossTerm, Batch, Context, Loss, Window
 from ._model import GenericModel, Terms
 from ._types import Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
+
+# The terms, their sum and what a term of your own subclasses and receives (AbstractLossTerm,
+# Batch, Context, Window: the extension API, defined in _loss_base).
+__all__ = ["AbstractJacobiEstimator", "AbstractLossTerm", "Batch", "Context",
+           "CrankNicolsonResidual", "DegeneracyPenalty", "DiscreteGradientResidual",
+           "ExactJacobi", "FrictionDegeneracy", "JacobiPenalty", "Loss", "MidpointResidual",
+           "NegativeTemperature", "PoissonDegeneracy", "SchemeResidual", "StochasticJacobi",
+           "Window", "stochastic_jacobi"]
 
 
 def _sq(v, scale):

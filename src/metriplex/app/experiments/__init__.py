@@ -33,7 +33,7 @@ from ..config import PRESETS, RunConfig, preset, scheme_from_name
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
-from ...diagnostics import _potential_along, error_over_time, evaluate, rollout_data, time_to_error
+from ...diagnostics import potential_along, error_over_time, evaluate, rollout_data, time_to_error
 from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
@@ -224,9 +224,9 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
     slope = abs(fit["slope"])
     # Both energies at every state of every rollout at once, each one compiled call (op by
     # op, each operation of the model would compile on its own for every length).
-    E_learned = _potential_along(model, model.energy, pred)
-    E_true = _potential_along(system.model, system.model.energy, pred)
-    E_start = _potential_along(system.model, system.model.energy, np.asarray(xs)[:, 0])
+    E_learned = potential_along(model, model.energy, pred)
+    E_true = potential_along(system.model, system.model.energy, pred)
+    E_start = potential_along(system.model, system.model.energy, np.asarray(xs)[:, 0])
     gauge, true = [], []
     for k, T in enumerate(lengths):
         T = int(failed[k]) if failed[k] >= 0 else int(T)
@@ -283,10 +283,10 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
     x_all = np.asarray(test.x)
-    E_l = _potential_along(model, model.energy, x_all)
-    S_l = _potential_along(model, model.entropy, x_all)
-    E_t = _potential_along(system.model, system.model.energy, x_all)
-    S_t = _potential_along(system.model, system.model.entropy, x_all)
+    E_l = potential_along(model, model.energy, x_all)
+    S_l = potential_along(model, model.entropy, x_all)
+    E_t = potential_along(system.model, system.model.energy, x_all)
+    S_t = potential_along(system.model, system.model.entropy, x_all)
     result["energy_gauge_fit"] = affine_fit(E_t, E_l)
     result.update(_energy_drifts(system, model, out, xs, lengths, result["energy_gauge_fit"]))
     plots.save_figure(plots.gauge_fit(E_t, E_l, label="E"), folder / "energy_fit", true=E_t,
@@ -298,8 +298,8 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
     m = test.trajectory == test.ids[k]
     fe, fs = result["energy_gauge_fit"], result.get("entropy_gauge_fit")
     # NaN after a failure (not the potentials of a zero state).
-    E_k = _potential_along(model, model.energy, pred)
-    S_k = _potential_along(model, model.entropy, pred)
+    E_k = potential_along(model, model.energy, pred)
+    S_k = potential_along(model, model.entropy, pred)
     E_fit = fe["slope"] * E_t[m] + fe["offset"]
     S_fit = None if fs is None else fs["slope"] * S_t[m] + fs["offset"]
     plots.save_figure(plots.energy_entropy(ts, E_k, S_k, E_true=E_fit, S_true=S_fit,
