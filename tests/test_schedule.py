@@ -47,3 +47,25 @@ def test_plateau_stops_on_its_own(tmp_path):
     _, history, *_ = train_run(data, config, tmp_path / "plateau", progress=False)
     assert history.step[-1] < budget and history.converged
     assert history.learning_rate[0] > 0 and jnp.isfinite(history.train["total"][-1])
+
+
+def test_the_default_optimiser_state_lets_the_plateau_cut_the_rate():
+    # The plateau schedule cuts the learning rate through the injected hyperparameter; an
+    # optimiser state it cannot read stops training at the first plateau, uncut (a change to
+    # how the state was recognised once did that silently: "after 0 learning-rate cuts").
+    from metriplex._train import adjustable_optimizer, is_adjustable, learning_rate_of
+    from metriplex._train import with_learning_rate
+
+    state = adjustable_optimizer(1e-2).init({"w": jnp.zeros(3)})
+    assert is_adjustable(state)
+    assert learning_rate_of(with_learning_rate(state, 3e-3), 0.0) == pytest.approx(3e-3)
+
+
+def test_plateau_cuts_the_rate_before_it_stops(tmp_path):
+    data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=3000,
+                       eval_every=50, patience=1, lr_cuts=2, schedule="plateau", float64=True)
+    _, history, *_ = train_run(data, config, tmp_path / "plateau", progress=False)
+    assert history.converged and "after 2 learning-rate cuts" in history.stopped
+    rates = sorted(set(history.learning_rate), reverse=True)
+    assert rates[:3] == pytest.approx([1e-2, 3e-3, 9e-4])

@@ -122,7 +122,10 @@ def annealing(step: int, start: int, end: int) -> float:
 def _rate_state(opt_state):
     """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
     last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
-    if isinstance(last, optax.InjectHyperparamsState) and "step_size" in last.hyperparams:
+    # inject_hyperparams' state is InjectStatefulHyperparamsState in current Optax and
+    # InjectHyperparamsState in older ones.
+    states = (optax.InjectHyperparamsState, optax.InjectStatefulHyperparamsState)
+    if isinstance(last, states) and "step_size" in last.hyperparams:
         return last
     return None
 
