@@ -42,7 +42,7 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
     (dict(w_temperature=1.0), "--w-temperature .* --entropy sum:I,J,...; got --entropy neural"),
     (dict(reversible_first=True, friction="zero"), "--reversible-first .* --friction neural"),
     (dict(reversible_first=True, poisson="zero"), "got --friction neural --poisson zero"),
-    (dict(w_temperature=-1.0, entropy="sum:2"), "w_temperature must be >= 0"),
+    (dict(w_temperature=-1.0, entropy="sum:2"), r"--w-temperature \(a loss weight\) must be >= 0"),
 ])
 def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     with pytest.raises(MetriplexError, match=match):
