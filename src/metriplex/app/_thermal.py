@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from .._errors import MetriplexError
+from ._option import entropy_variables as _sum_indices, option
 
 
 class ThermalFields(Protocol):
@@ -37,13 +38,13 @@ def temperature_weight(config: ThermalFields) -> float:
     (:func:`reversible_first_on`), else 0."""
     if config.w_temperature is not None:
         return config.w_temperature
-    return 1.0 if config.entropy.startswith("sum:") and reversible_first_on(config) else 0.0
+    return 1.0 if option(config.entropy).kind == "sum" and reversible_first_on(config) else 0.0
 
 
 def check_thermal_options(config: ThermalFields) -> None:
     """``--w-temperature`` needs entropy variables; ``--reversible-first`` a learned friction
     beside a non-zero L."""
-    if (config.w_temperature or 0.0) > 0 and not config.entropy.startswith("sum:"):
+    if (config.w_temperature or 0.0) > 0 and option(config.entropy).kind != "sum":
         raise MetriplexError(
             f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
             f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
@@ -57,4 +58,4 @@ def check_thermal_options(config: ThermalFields) -> None:
 
 def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
     """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
-    return tuple(int(v) for v in config.entropy.partition(":")[2].split(",") if v.strip())
+    return _sum_indices(config.entropy)

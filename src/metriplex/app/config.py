@@ -34,6 +34,7 @@ from ._choices import (  # noqa: F401
     choices_help,
 )
 
+from ._option import option
 from ._presets import PRESETS
 
 from ._thermal import (  # noqa: F401 (re-exported)
@@ -144,11 +145,11 @@ def _indices(text: str, n: int, option: str) -> tuple[int, ...]:
     return idx
 
 
-def _choice(value: str, allowed: tuple[str, ...], option: str) -> str:
-    head = value.split(":", 1)[0]
+def _choice(value: str, allowed: tuple[str, ...], flag: str) -> str:
+    head = option(value).kind
     if head not in allowed:
         raise MetriplexError(
-            f"{option} must be one of {', '.join(allowed)}; got {value!r}."
+            f"{flag} must be one of {', '.join(allowed)}; got {value!r}."
         )
     return head
 
@@ -184,13 +185,13 @@ def validate(config: RunConfig, n: int) -> None:
     _choice(config.energy, tuple(ENERGY_CHOICES), "--energy")
     head = _choice(config.entropy, tuple(ENTROPY_CHOICES), "--entropy")
     if head == "sum":
-        _indices(config.entropy.partition(":")[2], n, "--entropy sum:I,J,...")
+        _indices(option(config.entropy).argument, n, "--entropy sum:I,J,...")
     head = _choice(config.poisson, tuple(POISSON_CHOICES), "--poisson")
     if head == "file":
         _known_poisson(config, n)
     if head == "canonical":
         try:
-            K = int(config.poisson.partition(":")[2])
+            K = int(option(config.poisson).argument)
         except ValueError:
             raise MetriplexError(
                 f"--poisson canonical:K needs an integer K (the number of position/momentum "
@@ -332,7 +333,7 @@ def exact_blocks(config: RunConfig) -> tuple[bool, bool]:
         return True, True
     if config.degeneracy == "soft":
         return False, False
-    return (config.poisson == "neural" and config.entropy.startswith("sum"),
+    return (config.poisson == "neural" and option(config.entropy).kind == "sum",
             config.friction == "neural" and reversible_first_on(config))
 
 
@@ -358,9 +359,10 @@ def _known_poisson(config: RunConfig, n: int):
         return None
     if config.poisson == "zero":
         return ZeroPoisson(n)
-    if config.poisson.startswith("file:"):
-        return ConstantPoisson(read_matrix(config.poisson.partition(":")[2], "L", n))
-    return CanonicalPoisson(n, int(config.poisson.partition(":")[2]))
+    kind, argument = option(config.poisson)
+    if kind == "file":
+        return ConstantPoisson(read_matrix(argument, "L", n))
+    return CanonicalPoisson(n, int(argument))
 
 
 def _known_friction(config: RunConfig, n: int):
@@ -369,7 +371,7 @@ def _known_friction(config: RunConfig, n: int):
         return None
     if config.friction == "zero":
         return ZeroFriction(n)
-    return ConstantFriction(read_matrix(config.friction.partition(":")[2], "M", n))
+    return ConstantFriction(read_matrix(option(config.friction).argument, "M", n))
 
 
 def _known_entropy(config: RunConfig, n: int):
@@ -378,7 +380,7 @@ def _known_entropy(config: RunConfig, n: int):
         return None
     if config.entropy == "zero":
         return ZeroPotential()
-    return SumOf(_indices(config.entropy.partition(":")[2], n, "--entropy"))
+    return SumOf(_indices(option(config.entropy).argument, n, "--entropy"))
 
 
 def preset(name: str, **overrides: Any) -> RunConfig:
