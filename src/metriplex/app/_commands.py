@@ -7,6 +7,7 @@ module; this module never imports the parser.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import math
 import sys
 from pathlib import Path
@@ -124,7 +125,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     from ._selection import check_selection, choose_trajectories
     from .config import validate
     from ..io import read
-    from .runs import check_run_folder, evaluate_run, train_run, write_json
+    from .runs import RunData, check_run_folder, evaluate_run, train_parts, write_json
 
     out = Path(args.out)
     check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
@@ -141,13 +142,19 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     with RunLock(out) as lock:
         if lock.note:
             print(lock.note, file=sys.stderr)
-        model, history, train, valid, seconds = train_run(
-            data, config, out, overwrite=args.overwrite, resume=args.resume,
-            progress=not args.quiet, trajectories=trajectories,
-            validation_ids=validation_ids, source={"file": str(args.data), "dt": args.dt},
-        )
+        parts = RunData.of(data, config, trajectories=trajectories,
+                           validation_ids=validation_ids,
+                           source={"file": str(args.data), "dt": args.dt})
+        del data  # the training holds only its parts of the data (large data: memory)
+        model, history, train, valid, seconds = train_parts(
+            parts, config, out, overwrite=args.overwrite, resume=args.resume,
+            progress=not args.quiet)
         target = valid if valid is not None else train
-        del data, train  # the evaluation holds only what it rolls out (large data: memory)
+        # The evaluation holds only what it rolls out (large data: memory). The loss figure
+        # leaves a reference cycle through matplotlib's frames that holds the training's
+        # locals, the training part among them, until the collector runs: collect now.
+        del parts, train
+        gc.collect()
         # The step check is left to `evaluate`: after training it would add a compilation
         # (seconds) to every run for what the final line does not print.
         metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",

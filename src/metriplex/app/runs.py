@@ -13,7 +13,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -97,9 +97,48 @@ def train_run(
     with RunLock(out) as lock:
         if lock.note:
             print(lock.note, file=sys.stderr)
-        return _train_run(data, config, out, overwrite=overwrite, resume=resume,
-                          progress=progress, trajectories=trajectories,
-                          validation_ids=validation_ids, source=source)
+        parts = RunData.of(data, config, trajectories=trajectories,
+                           validation_ids=validation_ids, source=source)
+        return train_parts(parts, config, out, overwrite=overwrite, resume=resume,
+                           progress=progress)
+
+
+class RunData(NamedTuple):
+    """What a training keeps of its data: the ``train`` and ``valid`` parts of
+    :func:`split_trajectories`, ``info``, the source and fingerprint of the whole data, and
+    ``validation_by`` (``"ids"`` where given, else ``"fraction"``), both recorded in
+    ``config.json``. Without the whole data, which the caller can then drop: ``metriplex
+    train`` holds the file's states once, not twice (#14)."""
+
+    train: Trajectories
+    valid: Trajectories | None
+    info: dict
+    validation_by: str
+
+    @classmethod
+    def of(cls, data: Trajectories, config: RunConfig, *,
+           trajectories: ArrayLike | None = None, validation_ids: ArrayLike | None = None,
+           source: dict | None = None) -> "RunData":
+        """The parts of ``data`` that :func:`train_run` trains and validates on (its
+        ``trajectories``, ``validation_ids`` and ``source``)."""
+        train, valid = split_trajectories(data, config, trajectories=trajectories,
+                                          validation_ids=validation_ids)
+        return cls(train, valid, {**(source or {}), **data.fingerprint()},
+                   "fraction" if validation_ids is None else "ids")
+
+
+def train_parts(parts: RunData, config: RunConfig, out: str | Path, *,
+                overwrite: bool = False, resume: bool = False, progress: bool = True,
+                ) -> tuple[GenericModel, History, Trajectories, Trajectories | None, float]:
+    """:func:`train_run` on data already split (:meth:`RunData.of`)."""
+    out = Path(out)
+    validate(config, parts.train.n)
+    check_output_folder(out)
+    with RunLock(out) as lock:
+        if lock.note:
+            print(lock.note, file=sys.stderr)
+        return _train_run(parts, config, out, overwrite=overwrite, resume=resume,
+                          progress=progress)
 
 
 def split_trajectories(data: Trajectories, config: RunConfig, *,
@@ -160,8 +199,7 @@ def _check_resume(stored: dict, data_info: dict, train, valid) -> None:
         )
 
 
-def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=None,
-               validation_ids=None, source=None):
+def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     if config.float64:
         jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64 if config.float64 else jnp.float32
@@ -184,9 +222,7 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
                 "Repeat the original options (config.json in the run folder lists them), or "
                 "start a new run (--overwrite)."
             )
-    train, valid = split_trajectories(data, config, trajectories=trajectories,
-                                      validation_ids=validation_ids)
-    data_info = {**(source or {}), **data.fingerprint()}
+    train, valid, data_info, validation_by = parts
     if resume:
         _check_resume(run_config(out), data_info, train, valid)
     model_key, fit_key = jr.split(jr.key(config.seed))
@@ -203,13 +239,13 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
     loss = build_loss(config, units)
     header = {
         "config": config.to_json(),
-        "names": list(data.names),
-        "n": data.n,
+        "names": list(train.names),
+        "n": train.n,
         "train_trajectories": [int(i) for i in train.ids],
         "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
         # "ids": given (--validation-ids, --split); "fraction": config.validation of them at
         # random (config.seed), or the last samples of a single trajectory.
-        "validation_by": "fraction" if validation_ids is None else "ids",
+        "validation_by": validation_by,
         # The whole data file as read (--dt applied), whichever trajectories were selected.
         "data": data_info,
         "loss_terms": list(loss.names),
@@ -239,12 +275,12 @@ def _train_run(data, config, out, *, overwrite, resume, progress, trajectories=N
         )
     except TrainingDiverged as e:
         if e.model is not None:
-            save(out / "model.mpx", e.model, n=data.n, names=data.names)
+            save(out / "model.mpx", e.model, n=train.n, names=train.names)
         if e.history is not None:
             write_json(out / "history.json", e.history.to_json())
         raise
     seconds = time.perf_counter() - began  # both stages
-    save(out / "model.mpx", model, n=data.n, names=data.names,
+    save(out / "model.mpx", model, n=train.n, names=train.names,
          extra={"train_seconds": seconds})
     write_json(out / "history.json", history.to_json())
     plots.save_figure(
