@@ -12,6 +12,7 @@ from metriplex import MetriplexError
 from metriplex.app.config import (
     PRESETS,
     RunConfig,
+    confine_on,
     exact_blocks,
     preset,
     reversible_first_on,
@@ -19,6 +20,7 @@ from metriplex.app.config import (
     validate,
 )
 from metriplex.app._build import build_model, units_for
+from metriplex.app._stages import reversible_first
 from metriplex.app.runs import train_run
 from metriplex.systems import generate
 
@@ -73,7 +75,33 @@ def test_by_default_reversible_first_the_hinge_and_exact_m_go_together(structure
 def test_the_presets_keep_what_they_were_tuned_with(name):
     config = preset(name)
     assert not reversible_first_on(config) and temperature_weight(config) == 0.0
-    assert not config.confine
+    assert not confine_on(config)
+
+
+@pytest.mark.parametrize("structure,on", [
+    (dict(poisson="canonical:1", entropy="sum:2"), True),  # S given, M grad E = 0 exact
+    (dict(entropy="sum:2"), True),
+    (dict(), False),  # S learned: test states beyond the wall lost accuracy (docs/zoo.md)
+    (dict(poisson="canonical:1", entropy="sum:2", degeneracy="soft"), False),  # E not conserved
+    (dict(poisson="canonical:1", entropy="sum:2", friction="zero"), False),
+    (dict(poisson="zero", entropy="sum:0,1"), False),
+])
+def test_the_wall_is_on_by_default_where_s_is_given_and_e_is_conserved(structure, on):
+    config = RunConfig(**structure)
+    assert confine_on(config) is on
+    assert confine_on(dataclasses.replace(config, confine=not on)) is (not on)
+
+
+def test_the_first_stage_trains_the_energy_with_the_wall_the_main_model_has():
+    data = generate("oscillator-bath", trajectories=4, steps=20, seed=0)
+    config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=40, eval_every=20,
+                       average_steps=0, validation=0.0)
+    units = units_for(config, data)
+    start = build_model(config, data, key=jr.key(0), units=units)
+    assert start.energy.confinement is not None
+    model = reversible_first(start, config, data, None, units=units, constant=(),
+                             dtype=jnp.float64, key=jr.key(1))
+    assert model.energy.confinement == start.energy.confinement
 
 
 def test_max_minutes_caps_both_stages(tmp_path, capsys):

@@ -28,6 +28,7 @@ from .config import (
     _known_friction,
     _known_poisson,
     entropy_variables,
+    confine_on,
     exact_blocks,
     scheme_from_name,
     temperature_weight,
@@ -81,7 +82,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
     energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
                           quadratic=bool(config.quadratic),
-                          confinement=Confinement.around(x) if config.confine else None,
+                          confinement=Confinement.around(x) if confine_on(config) else None,
                           key=kE, **net)
     entropy = _known_entropy(config, n)
     if entropy is None:

@@ -16,7 +16,7 @@ from .._units import Units
 from ..data import Trajectories
 from ..train import fit
 from ._build import build_loss, build_model, fit_settings
-from .config import LEARNED_POISSON, RunConfig, temperature_weight
+from .config import LEARNED_POISSON, RunConfig, confine_on, temperature_weight
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -37,9 +37,11 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     so judging it by them would keep an almost untrained one. ``max_seconds`` caps this stage
     (``--max-minutes``, which the main stage shares).
     """
-    # The first stage keeps the hinge on negative temperatures that the main one has.
+    # The first stage keeps the hinge on negative temperatures and the wall that the main one
+    # has (decided for the main stage's structure, since its energy is carried over).
     first = dataclasses.replace(config, friction="zero", reversible_first=False,
-                                w_temperature=temperature_weight(config))
+                                w_temperature=temperature_weight(config),
+                                confine=confine_on(config))
     init_key, key = jax.random.split(key)
     start = with_dtype(build_model(first, train, key=init_key, units=units,
                                    constant=constant), dtype)

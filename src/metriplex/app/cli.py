@@ -107,8 +107,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
                    "by one standard deviation and quadratic outside it, so that its level sets "
-                   "are bounded: with M grad E = 0 "
-                   f"no rollout can run away (default {'on' if d.confine else 'off'})")
+                   "are bounded: with M grad E = 0 no rollout can run away (default: on where "
+                   "S is given as a sum, --entropy sum:..., and M grad E = 0 is exact)")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")

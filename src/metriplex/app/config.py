@@ -108,7 +108,7 @@ class RunConfig:
     average_steps: int = 500
     w_temperature: float | None = None
     reversible_first: bool | None = None
-    confine: bool = False
+    confine: bool | None = None
     constant: str = "auto"
 
     def to_json(self) -> dict[str, Any]:
@@ -335,6 +335,17 @@ def exact_blocks(config: RunConfig) -> tuple[bool, bool]:
         return False, False
     return (config.poisson == "neural" and option(config.entropy).kind == "sum",
             config.friction == "neural" and reversible_first_on(config))
+
+
+def confine_on(config: RunConfig) -> bool:
+    """Whether the learned E gets the wall around the training data (``--confine``). Left out:
+    where S is given as a sum of entropy variables and M grad E = 0 is exact (then E is
+    conserved by the model's flow, and bounded level sets keep every rollout bounded). Not
+    where S is learned: there test states that leave the training box by more than the wall's
+    margin were measured to lose accuracy to it (docs/zoo.md)."""
+    if config.confine is not None:
+        return config.confine
+    return option(config.entropy).kind == "sum" and exact_blocks(config)[1]
 
 
 def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
