@@ -254,6 +254,26 @@ def test_auto_solver_matches_newton_and_falls_back_where_the_fixed_point_diverge
     np.testing.assert_allclose(np.asarray(auto.xs)[..., 0], exact_cn, rtol=1e-12, atol=1e-14)
 
 
+def test_a_step_whose_solve_fails_is_retaken_in_substeps_when_asked():
+    # k dt = 5: the fixed point diverges (its contraction factor is k dt / 2 = 2.5); in 8
+    # substeps (k dt / 16 < 1) it converges, and the step is exactly 8 CN substeps.
+    x1 = jnp.array([[1.0], [0.5]])
+    scheme = CrankNicolson(root_finder=FixedPoint())
+    assert np.asarray(solve(STIFF, x1, TS_STIFF, scheme=scheme).failed_step).tolist() == [1, 1]
+    out = solve(STIFF, x1, TS_STIFF, scheme=scheme, retry=8)
+    assert out.ok
+    growth = ((1 - 5 / 16) / (1 + 5 / 16)) ** 8  # 8 CN substeps of k dt = 5/8
+    exact = np.asarray(x1) * growth ** np.arange(11)[None, :]
+    np.testing.assert_allclose(np.asarray(out.xs)[..., 0], exact, rtol=1e-9, atol=1e-12)
+    # A model that blows up fails either way: retrying changes nothing there.
+    grows = mx.GenericModel(mx.Known(lambda x: 0.0 * x[0]), mx.Known(lambda x: x[0]),
+                            mx.ZeroPoisson(1), mx.KnownFriction(lambda x: x[None, :] ** 4))
+    big = solve(grows, jnp.array([[2.0]]), jnp.linspace(0.0, 5.0, 6), scheme=scheme, retry=8)
+    assert not big.ok
+    with pytest.raises(mx.MetriplexError, match="retry must be an integer >= 0"):
+        solve(STIFF, x1, TS_STIFF, retry=-1)
+
+
 def test_a_root_finder_is_an_object_and_a_solver_name_is_parsed_at_the_edge():
     # The library takes root finder objects; a string is explained, never silently kept.
     with pytest.raises(mx.MetriplexError, match="root_finder must be a root finder"):

@@ -32,6 +32,7 @@ from ._model import GenericModel, float_dtype
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
+from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 
 _TINY = 1e-300
@@ -44,8 +45,11 @@ ROLLOUT_BATCHES = 10
 
 
 def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractScheme | None = None,
-                 progress: bool = False) -> tuple[Rollout, np.ndarray, np.ndarray]:
+                 progress: bool = False,
+                 retry: int = RETRY_SUBSTEPS) -> tuple[Rollout, np.ndarray, np.ndarray]:
     """Roll ``model`` out from each trajectory's first state on its own grid (ragged-safe).
+    A step whose solve fails is retaken as ``retry`` substeps before the trajectory is called
+    failed (:func:`metriplex.solve`'s ``retry``; 0: never).
 
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
     Data of more than :data:`ROLLOUT_BATCH_STATES` states are rolled out in
@@ -57,7 +61,8 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
     K, T = ts.shape
     size = K if K * T <= ROLLOUT_BATCH_STATES else -(-K // max(1, ROLLOUT_BATCHES))
     if size >= K:
-        out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme)
+        out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme,
+                    retry=retry)
         return out, xs, lengths
     from tqdm.auto import tqdm
 
@@ -71,7 +76,8 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
                 pad = size - (b - a)
                 x0 = np.concatenate([x0, np.repeat(x0[-1:], pad, axis=0)])
                 grid = np.concatenate([grid, np.full((pad, T), grid[-1, 0])])
-            out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme)
+            out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme,
+                        retry=retry)
             parts.append([np.asarray(v)[: b - a] for v in out])
             bar.update(b - a)
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths

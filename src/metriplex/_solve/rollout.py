@@ -10,13 +10,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import MetriplexError, RolloutFailure
+from .._errors import MetriplexError, RolloutFailure, expect_integer
 from .._model import AbstractModel
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
 from ._implicit import _AbstractImplicit
 from .root_finder import Newton, _solver_name
 from .crank_nicolson import CrankNicolson
+
+
+#: The substeps in which evaluations and ``metriplex rollout`` retake a step whose solve failed
+#: (``solve(retry=...)``).
+RETRY_SUBSTEPS = 8
 
 
 class Rollout(NamedTuple):
@@ -52,10 +57,26 @@ def _predict(x, d1, h1, d2, h2, h):
     return x + h * s1 + (h * (h + h1)) * curv
 
 
-def _rollout(model, scheme, x0, ts):
+def _substeps(model, scheme, x, h, retry, k):
+    """``k`` equal steps of ``h / k`` from ``x`` for the rows where ``retry``; the others take
+    zero steps. Returns ``(y, ok, iterations)``; ``ok`` only where every substep converged."""
+    h = jnp.where(retry, h / k, 0.0)
+
+    def one(_, carry):
+        xi, oki, itsi = carry
+        yi, okk, itk = scheme.step_batch(model, xi, h, xi)
+        good = oki & okk & jnp.all(jnp.isfinite(yi), axis=-1)
+        return (jnp.where(good[:, None], yi, xi), good,
+                itsi + jnp.asarray(itk, itsi.dtype))
+
+    return jax.lax.fori_loop(0, k, one, (x, retry, jnp.zeros(x.shape[:1], jnp.int32)))
+
+
+def _rollout(model, scheme, x0, ts, retry=0):
     """Roll out a batch: ``x0`` ``(B, n)``, ``ts`` ``(B, T)``; the scan runs over time and each
     step advances the whole batch at once (so the scheme can decide per step, for the batch,
-    whether Newton is needed)."""
+    whether Newton is needed). ``retry`` (static): a step whose solve fails is taken again as
+    that many equal substeps before the trajectory is marked failed (0: never)."""
     dts = jnp.diff(ts, axis=-1).T  # (T - 1, B)
     zero = jnp.zeros(x0.shape[:1], x0.dtype)
 
@@ -65,6 +86,13 @@ def _rollout(model, scheme, x0, ts):
         h = jnp.where(failed, 0.0, dt)
         guess = jax.vmap(_predict)(x, d1, h1, d2, h2, h)
         y, ok, its = scheme.step_batch(model, x, h, guess)
+        if retry:
+            again = (h > 0) & ~ok
+            y, ok, its = jax.lax.cond(
+                jnp.any(again),
+                lambda: _merge(again, _substeps(model, scheme, x, h, again, retry),
+                               (y, ok, its)),
+                lambda: (y, ok, jnp.asarray(its, jnp.int32)))
         moved = h > 0
         bad = failed | (moved & ~ok)
         y = jnp.where(moved[:, None], y, x)  # a zero step keeps the state exactly
@@ -92,9 +120,17 @@ def _rollout(model, scheme, x0, ts):
     return xs, failed_step, its
 
 
+def _merge(where, retried, first):
+    """The retried ``(y, ok, iterations)`` where ``where``, the first attempt elsewhere."""
+    (y2, ok2, its2), (y, ok, its) = retried, first
+    its = jnp.asarray(its, jnp.int32)
+    return (jnp.where(where[:, None], y2, y), jnp.where(where, ok2, ok),
+            jnp.where(where, its + its2, its))
+
+
 @eqx.filter_jit
-def _rollout_one(model, scheme, x0, ts):
-    xs, failed, its = _rollout(model, scheme, x0[None], ts[None])
+def _rollout_one(model, scheme, x0, ts, retry=0):
+    xs, failed, its = _rollout(model, scheme, x0[None], ts[None], retry)
     return xs[0], failed[0], its[0]
 
 
@@ -158,6 +194,7 @@ def solve(
     *,
     scheme: AbstractScheme | None = None,
     throw: bool = False,
+    retry: int = 0,
 ) -> Rollout:
     """Roll out ``model`` from ``x0`` on the time grid ``ts``.
 
@@ -170,14 +207,21 @@ def solve(
     With ``throw=True`` (as in Diffrax) the first failure raises
     :class:`~metriplex.RolloutFailure` instead, naming the trajectory and the time, with the
     states computed up to there in ``.partial``.
+
+    ``retry``: a step whose solve does not converge (or whose state is not finite) is taken
+    again as ``retry`` equal substeps, from the same state, before the trajectory is marked
+    failed (0, the default: never). A model that blows up fails either way; one whose field is
+    merely stiff somewhere goes on. ``metriplex.evaluate`` and ``metriplex rollout`` use
+    :data:`RETRY_SUBSTEPS`.
     """
-    out = _solve(model, x0, ts, scheme)
+    retry = expect_integer(retry, what="retry", least=0)
+    out = _solve(model, x0, ts, scheme, retry)
     if throw:
         _raise_first_failure(out, scheme)
     return out
 
 
-def _solve(model, x0, ts, scheme) -> Rollout:
+def _solve(model, x0, ts, scheme, retry=0) -> Rollout:
     scheme = CrankNicolson() if scheme is None else scheme
     x0 = jnp.asarray(x0)
     ts = jnp.asarray(ts, dtype=x0.dtype)
@@ -185,7 +229,7 @@ def _solve(model, x0, ts, scheme) -> Rollout:
     if x0.ndim == 1:
         if ts.ndim != 1:
             raise MetriplexError(f"a single x0 needs ts of shape (T,); got {ts.shape}.")
-        xs, failed, its = _rollout_one(model, scheme, x0, ts)
+        xs, failed, its = _rollout_one(model, scheme, x0, ts, retry)
         return Rollout(ts, xs, failed, its)
     if ts.ndim == 1:
         ts = jnp.broadcast_to(ts, (x0.shape[0], ts.shape[0]))
@@ -194,7 +238,7 @@ def _solve(model, x0, ts, scheme) -> Rollout:
             f"ts has {ts.shape[0]} grids for {x0.shape[0]} initial states; give one shared grid "
             "of shape (T,) or one per state."
         )
-    xs, failed, its = _rollout_batch(model, scheme, x0, ts)
+    xs, failed, its = _rollout_batch(model, scheme, x0, ts, retry)
     return Rollout(ts, xs, failed, its)
 
 
