@@ -24,6 +24,7 @@ from metriplex.integrate import (
     solve,
 )
 from metriplex.app.config import scheme_from_name
+from metriplex.diagnostics import rollout_data
 
 
 def _rotor_energy(x):
@@ -298,10 +299,16 @@ def test_error_to_horizon_ignores_a_failure_after_the_horizon():
     xs = x0[:, None] / (1.0 - x0[:, None] * ts[None, :])
     xs[0, 3:] = xs[0, 2]  # the exact solution is gone too (it blows up at t = 10)
     data = mx.Trajectories.from_list([(ts, xs[b][:, None]) for b in range(2)], ["x"])
-    report = mx.evaluate(BLOW_UP, data, horizon=1.0)
+    # Without the evaluation's retry: in 8 substeps the step from t = 1 to 8 converges (the
+    # exact solution lives until t = 10), and this test is about a rollout that failed.
+    failing = rollout_data(BLOW_UP, data, retry=0)
+    report = mx.evaluate(BLOW_UP, data, horizon=1.0, rollout=failing)
     assert report["rollout_failures"] == 1
     assert report["rollout_error"][0] == float("inf")
     assert report["rollout_error_to_horizon"][0] < 1e-3
     assert np.isfinite(report["rollout_error_to_horizon_mean"])
     # A failure within the horizon still counts as an infinite error there.
-    assert mx.evaluate(BLOW_UP, data, horizon=8.0)["rollout_error_to_horizon"][0] == float("inf")
+    assert mx.evaluate(BLOW_UP, data, horizon=8.0, rollout=failing)[
+        "rollout_error_to_horizon"][0] == float("inf")
+    # With the retry (evaluate's default) the rollout completes.
+    assert mx.evaluate(BLOW_UP, data, horizon=1.0)["rollout_failures"] == 0

@@ -85,6 +85,8 @@ def test_the_presets_keep_what_they_were_tuned_with(name):
     (dict(poisson="canonical:1", entropy="sum:2", degeneracy="soft"), False),  # E not conserved
     (dict(poisson="canonical:1", entropy="sum:2", friction="zero"), False),
     (dict(poisson="zero", entropy="sum:0,1"), False),
+    # M given: exact degeneracy applies to learned blocks only, so E need not be conserved
+    (dict(entropy="sum:2", friction="file:M.npy", degeneracy="exact"), False),
 ])
 def test_the_wall_is_on_by_default_where_s_is_given_and_e_is_conserved(structure, on):
     config = RunConfig(**structure)

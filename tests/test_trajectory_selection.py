@@ -10,6 +10,7 @@ trajectories).
 
 import contextlib
 import io
+import dataclasses
 import json
 import re
 import subprocess
@@ -275,3 +276,20 @@ def test_rollout_and_evaluate_on_chosen_trajectories(trained, tmp_path):
     assert res.returncode == 0, res.stderr
     metrics = json.loads((tmp_path / "m.json").read_text())
     assert metrics["trajectory_ids"] == [6, 7] and len(metrics["rollout_error"]) == 2
+
+
+def test_resume_compares_what_decided_options_decide():
+    # A run saved with the wall decided (confine false, or spelled out before the option's
+    # default became None) resumes with the option left out where it decides the same; a real
+    # difference names the flags, not False/None.
+    from metriplex.app.config import RunConfig
+    from metriplex.app.runs import _resume_differences
+
+    given = RunConfig(entropy="sum:2", poisson="canonical:1")  # the wall decided: on
+    assert _resume_differences(dataclasses.replace(given, confine=True), given) == ""
+    assert _resume_differences(dataclasses.replace(given, reversible_first=True,
+                                                   w_temperature=1.0), given) == ""
+    said = _resume_differences(dataclasses.replace(given, confine=False), given)
+    assert said == "it ran with --no-confine, this command gives --confine"
+    learned = RunConfig()  # S learned: the wall decided off
+    assert _resume_differences(dataclasses.replace(learned, confine=False), learned) == ""

@@ -351,5 +351,6 @@ def test_too_little_data_to_compare_residuals_gives_cannot_tell():
     held = _reasons(v)["held_out_pairs"]
     assert v["outcome"] == CANNOT_TELL and held["passed"] is False and held["value"] == 2
     assert "only 2 pairs are held out from the reference's training (1 trajectories" in \
-        held["note"] and "too little data" in held["note"]
+        held["note"] and "a share of 0.2 of them" in held["note"] and \
+        "too little data" in held["note"]
     assert "held_out_pairs = 2" in v["statement"]

@@ -35,18 +35,26 @@ def _fmt(v) -> str:
 
 
 def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool | None,
-                      stopped: str | None, th, held_out: int = 0) -> list[dict[str, Any]]:
+                      stopped: str | None, th, held_out: int = 0,
+                      fraction: float = 0.2) -> list[dict[str, Any]]:
     """``held_out_pairs``, ``rollout_failures``, ``training_converged`` and, where ``report``
     measured it, ``step_sensitivity``: is the evidence sound? ``held_out``: the number of pairs
-    that the black-box reference did not train on, where both models are compared."""
+    that the black-box reference did not train on, where both models are compared;
+    ``fraction``: the share of the trajectories it holds out."""
     enough = held_out >= th.held_out_pairs
-    reasons = [_reason(
-        "held_out_pairs", held_out, th.held_out_pairs, enough, CANNOT_TELL,
-        f"{held_out} pairs held out from the reference's training, on which both models are "
-        "compared" if enough else
-        f"only {held_out} pairs are held out from the reference's training ({trajectories} "
-        "trajectories in the data; a fifth of them, or the last fifth of a single one, is held "
-        "out): too little data to compare residuals on; give more or longer trajectories")]
+    if enough:
+        note = (f"{held_out} pairs held out from the reference's training, on which both "
+                "models are compared")
+    elif fraction == 0:
+        note = ("the reference holds out nothing (validation fraction 0), so the residuals "
+                "would be compared where it trained; hold out a fraction of the trajectories")
+    else:
+        note = (f"only {held_out} pairs are held out from the reference's training "
+                f"({trajectories} trajectories in the data; a share of {fraction:g} of them, or "
+                "of a single one's samples, is held out): too little data to compare residuals "
+                "on; give more or longer trajectories")
+    reasons = [_reason("held_out_pairs", held_out, th.held_out_pairs, enough, CANNOT_TELL,
+                       note)]
     k = int(report.get("trajectories", trajectories))
     n_failed = int(report.get("rollout_failures", 0))
     reasons.append(_reason(

@@ -307,13 +307,14 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
     dtype = float_dtype(model)
     x0 = jnp.asarray(xs[pick, 0], dtype)
     if rollout is None:
-        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme)
+        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
         on_grid, failed = np.asarray(out.xs, np.float64), np.asarray(out.failed_step)
     else:
         on_grid = np.asarray(rollout[0].xs, np.float64)[pick, :w]
         failed = np.asarray(rollout[0].failed_step)[pick]
         failed = np.where(failed >= w, -1, failed)
-    refined = solve(model, x0, jnp.asarray(fine, dtype), scheme=scheme)
+    # Retried as the evaluation's rollouts are, so a model they complete is compared here too.
+    refined = solve(model, x0, jnp.asarray(fine, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
     ok = (failed < 0) & (np.asarray(refined.failed_step) < 0)
     if not ok.any():
         return None, (f"every rollout failed, with the data's step or one {refine}x smaller "

@@ -244,7 +244,8 @@ def verdict(
 
     # The checks, in the order of the module docstring's table.
     reasons = _soundness_checks(report, len(data), converged, stopped, th,
-                                held_out=len(pairs.dt) if valid is not None else 0)
+                                held_out=len(pairs.dt) if valid is not None else 0,
+                                fraction=reference.validation)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th)
     reasons += compared
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))

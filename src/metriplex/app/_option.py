@@ -19,7 +19,7 @@ class Option(NamedTuple):
 def option(value: str) -> Option:
     """The :class:`Option` that ``value`` (e.g. ``"sum:8,9"``) spells."""
     kind, _, argument = value.partition(":")
-    return Option(kind.strip(), argument.strip())
+    return Option(kind, argument)
 
 
 def entropy_variables(entropy: str) -> tuple[int, ...]:

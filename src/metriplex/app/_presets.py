@@ -10,9 +10,9 @@ import dataclasses
 import math
 from typing import Any
 
-#: Every preset was tuned and measured (docs/experiments.md) before the parameter average and
-#: the reversible-first stage with its temperature hinge became defaults, so it keeps what it
-#: was tuned with.
+#: Every preset was tuned and measured (docs/experiments.md) before the parameter average, the
+#: reversible-first stage with its temperature hinge and the wall around the data (where S is
+#: given) became defaults, so it keeps what it was tuned with.
 _TUNED_WITHOUT_AVERAGE = dict(average_steps=0, reversible_first=False, w_temperature=0.0,
                               confine=False)
 

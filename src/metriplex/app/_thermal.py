@@ -1,6 +1,7 @@
 """The options against a friction that carries the motion (README, *Friction that carries the
 motion*): whether training starts with L grad E alone, the weight of the hinge on negative
-learned temperatures, and their checks."""
+learned temperatures, which learned blocks are exactly degenerate (``--degeneracy``), whether
+the learned E has the wall around the data (``--confine``), and their checks."""
 
 from __future__ import annotations
 
@@ -19,6 +20,8 @@ class ThermalFields(Protocol):
     friction: str
     reversible_first: bool | None
     w_temperature: float | None
+    degeneracy: str
+    confine: bool | None
 
 
 def reversible_first_on(config: ThermalFields) -> bool:
@@ -59,3 +62,34 @@ def check_thermal_options(config: ThermalFields) -> None:
 def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
     """The indices of ``--entropy sum:I,J,...`` (checked against the data by :func:`validate`)."""
     return _sum_indices(config.entropy)
+
+
+#: ``--degeneracy``: ``auto`` makes a learned L exactly degenerate when S is given (then
+#: L grad S = 0 costs one projection with a known gradient, and the learned entropy can never
+#: decrease in a rollout), a learned M exactly degenerate when training starts with L grad E
+#: alone (:func:`reversible_first_on`: the learned flow then conserves the learned energy) and
+#: keeps the other conditions as penalties; ``exact`` makes every
+#: learned L and M exactly degenerate; ``soft`` uses penalties only.
+DEGENERACY_MODES = ("auto", "soft", "exact")
+
+
+def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
+    """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
+    if config.degeneracy == "exact":
+        return True, True
+    if config.degeneracy == "soft":
+        return False, False
+    return (config.poisson == "neural" and option(config.entropy).kind == "sum",
+            config.friction == "neural" and reversible_first_on(config))
+
+
+def confine_on(config: ThermalFields) -> bool:
+    """Whether the learned E gets the wall around the training data (``--confine``). Left out:
+    where S is given as a sum of entropy variables and a learned M has M grad E = 0 exact (then E is
+    conserved by the model's flow, and bounded level sets keep every rollout bounded). Not
+    where S is learned: there test states that leave the training box by more than the wall's
+    margin were measured to lose accuracy to it (docs/zoo.md)."""
+    if config.confine is not None:
+        return config.confine
+    return (option(config.entropy).kind == "sum" and config.friction == "neural"
+            and exact_blocks(config)[1])

@@ -38,7 +38,10 @@ from ._option import option
 from ._presets import PRESETS
 
 from ._thermal import (  # noqa: F401 (re-exported)
+    DEGENERACY_MODES,
     check_thermal_options,
+    confine_on,
+    exact_blocks,
     entropy_variables,
     reversible_first_on,
     temperature_weight,
@@ -317,36 +320,6 @@ def check_seed(seed: Any, option: str = "--seed") -> int:
 
 
 FEATURE_BLOCKS = ("energy", "entropy", "friction")
-
-#: ``--degeneracy``: ``auto`` makes a learned L exactly degenerate when S is given (then
-#: L grad S = 0 costs one projection with a known gradient, and the learned entropy can never
-#: decrease in a rollout), a learned M exactly degenerate when training starts with L grad E
-#: alone (:func:`reversible_first_on`: the learned flow then conserves the learned energy) and
-#: keeps the other conditions as penalties; ``exact`` makes every
-#: learned L and M exactly degenerate; ``soft`` uses penalties only.
-DEGENERACY_MODES = ("auto", "soft", "exact")
-
-
-def exact_blocks(config: RunConfig) -> tuple[bool, bool]:
-    """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
-    if config.degeneracy == "exact":
-        return True, True
-    if config.degeneracy == "soft":
-        return False, False
-    return (config.poisson == "neural" and option(config.entropy).kind == "sum",
-            config.friction == "neural" and reversible_first_on(config))
-
-
-def confine_on(config: RunConfig) -> bool:
-    """Whether the learned E gets the wall around the training data (``--confine``). Left out:
-    where S is given as a sum of entropy variables and M grad E = 0 is exact (then E is
-    conserved by the model's flow, and bounded level sets keep every rollout bounded). Not
-    where S is learned: there test states that leave the training box by more than the wall's
-    margin were measured to lose accuracy to it (docs/zoo.md)."""
-    if config.confine is not None:
-        return config.confine
-    return option(config.entropy).kind == "sum" and exact_blocks(config)[1]
-
 
 def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     blocks = tuple(b.strip() for b in config.features_for.split(",") if b.strip())

@@ -28,7 +28,8 @@ from ._selection import TrajectoryIds, format_ids
 from ._build import build_loss, build_model, constant_variables, fit_settings, units_for
 from ._report import report_figures
 from ._stages import reversible_first
-from .config import RunConfig, reversible_first_on, scheme_from_name, validate
+from .config import (RunConfig, confine_on, reversible_first_on, scheme_from_name,
+                     temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -69,6 +70,31 @@ def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
 #: Options a resumed run may change: the wall-time cap (``--max-minutes``), which changes no
 #: step of the training.
 RESUME_MAY_CHANGE = ("max_minutes",)
+
+#: Options whose default is decided from the others: a resume compares what they decide, so a
+#: run saved with the decision spelled out (or made before the option had a default of None)
+#: resumes with the option left out.
+_DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
+            "w_temperature": temperature_weight}
+
+
+def _resume_differences(saved: RunConfig, given: RunConfig) -> str:
+    """The options of ``given`` that differ from those of the interrupted run, as flags."""
+    said = []
+    for k in saved.to_json():
+        if k in RESUME_MAY_CHANGE:
+            continue
+        a, b = (_DECIDED[k](saved), _DECIDED[k](given)) if k in _DECIDED else \
+            (getattr(saved, k), getattr(given, k))
+        if a != b:
+            flag = "--" + k.replace("_", "-")
+            if isinstance(a, bool) and isinstance(b, bool):
+                on, off = flag, "--no-" + flag[2:]
+                said.append(f"it ran with {on if a else off}, this command gives "
+                            f"{on if b else off}")
+            else:
+                said.append(f"{flag} was {a!r}, given {b!r}")
+    return "; ".join(said)
 
 
 def train_run(
@@ -211,12 +237,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
-        saved = RunConfig.from_json(stored)
-        diff = [k for k in saved.to_json() if k not in RESUME_MAY_CHANGE
-                and getattr(saved, k) != getattr(config, k)]
-        if diff:
-            said = "; ".join(f"--{k.replace('_', '-')} was {getattr(saved, k)!r}, given "
-                             f"{getattr(config, k)!r}" for k in diff)
+        said = _resume_differences(RunConfig.from_json(stored), config)
+        if said:
             raise MetriplexError(
                 f"--resume needs the options of the interrupted run, but they differ: {said}. "
                 "Repeat the original options (config.json in the run folder lists them), or "
