@@ -55,6 +55,7 @@ from .structure import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .structure import CholeskyFriction as CholeskyFriction
 from .structure import ConstantFriction as ConstantFriction
 from .structure import ConstantPoisson as ConstantPoisson
+from .structure import Confinement as Confinement
 from .structure import LiePoisson as LiePoisson
 from .structure import MaskedFriction as MaskedFriction
 from .structure import MaskedPoisson as MaskedPoisson
