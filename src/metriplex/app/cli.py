@@ -20,8 +20,8 @@ from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
 from .config import FEATURES
 
-__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate", "cmd_reproduce", "cmd_rollout", "cmd_generate", "cmd_simulate",
-           "cmd_train", "main"]
+__all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate",
+           "cmd_generate", "cmd_reproduce", "cmd_rollout", "cmd_simulate", "cmd_train", "main"]
 
 
 
