@@ -17,6 +17,7 @@ from ._scheme import AbstractScheme
 from ._implicit import _AbstractImplicit
 from .root_finder import Newton, _solver_name
 from .crank_nicolson import CrankNicolson
+from .substeps import Substeps
 
 
 #: The substeps in which evaluations and ``metriplex rollout`` retake a step whose solve failed
@@ -57,21 +58,6 @@ def _predict(x, d1, h1, d2, h2, h):
     return x + h * s1 + (h * (h + h1)) * curv
 
 
-def _substeps(model, scheme, x, h, retry, k):
-    """``k`` equal steps of ``h / k`` from ``x`` for the rows where ``retry``; the others take
-    zero steps. Returns ``(y, ok, iterations)``; ``ok`` only where every substep converged."""
-    h = jnp.where(retry, h / k, 0.0)
-
-    def one(_, carry):
-        xi, oki, itsi = carry
-        yi, okk, itk = scheme.step_batch(model, xi, h, xi)
-        good = oki & okk & jnp.all(jnp.isfinite(yi), axis=-1)
-        return (jnp.where(good[:, None], yi, xi), good,
-                itsi + jnp.asarray(itk, itsi.dtype))
-
-    return jax.lax.fori_loop(0, k, one, (x, retry, jnp.zeros(x.shape[:1], jnp.int32)))
-
-
 def _rollout(model, scheme, x0, ts, retry=0):
     """Roll out a batch: ``x0`` ``(B, n)``, ``ts`` ``(B, T)``; the scan runs over time and each
     step advances the whole batch at once (so the scheme can decide per step, for the batch,
@@ -90,8 +76,9 @@ def _rollout(model, scheme, x0, ts, retry=0):
             again = (h > 0) & ~ok
             y, ok, its = jax.lax.cond(
                 jnp.any(again),
-                lambda: _merge(again, _substeps(model, scheme, x, h, again, retry),
-                               (y, ok, its)),
+                # the other rows take zero steps; their first attempt is kept
+                lambda: _merge(again, Substeps(scheme, retry).step_batch(
+                    model, x, jnp.where(again, h, 0.0), x), (y, ok, its)),
                 lambda: (y, ok, jnp.asarray(its, jnp.int32)))
         moved = h > 0
         bad = failed | (moved & ~ok)
@@ -123,7 +110,7 @@ def _rollout(model, scheme, x0, ts, retry=0):
 def _merge(where, retried, first):
     """The retried ``(y, ok, iterations)`` where ``where``, the first attempt elsewhere."""
     (y2, ok2, its2), (y, ok, its) = retried, first
-    its = jnp.asarray(its, jnp.int32)
+    its, its2 = jnp.asarray(its, jnp.int32), jnp.asarray(its2, jnp.int32)
     return (jnp.where(where[:, None], y2, y), jnp.where(where, ok2, ok),
             jnp.where(where, its + its2, its))
 
