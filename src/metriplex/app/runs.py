@@ -117,16 +117,11 @@ def train_run(
     and ``dt``) is recorded in ``config.json`` beside the data's fingerprint, which ``resume``
     compares with the interrupted run's.
     """
-    out = Path(out)
     validate(config, data.n)
-    check_output_folder(out)
-    with RunLock(out) as lock:
-        if lock.note:
-            print(lock.note, file=sys.stderr)
-        parts = RunData.of(data, config, trajectories=trajectories,
-                           validation_ids=validation_ids, source=source)
-        return train_parts(parts, config, out, overwrite=overwrite, resume=resume,
-                           progress=progress)
+    parts = RunData.of(data, config, trajectories=trajectories,
+                       validation_ids=validation_ids, source=source)
+    return train_parts(parts, config, out, overwrite=overwrite, resume=resume,
+                       progress=progress)
 
 
 class RunData(NamedTuple):
