@@ -4,6 +4,11 @@ energy that does not drive the motion, and a learned entropy that decreases."""
 
 from __future__ import annotations
 
+from ..verdict import Thresholds
+
+# The warnings fire where the verdict's structure checks fail: one limit for both.
+_LIMITS = Thresholds()
+
 
 def against_constant(metrics: dict) -> tuple[str, bool]:
     """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
@@ -22,7 +27,7 @@ def against_constant(metrics: dict) -> tuple[str, bool]:
 #: true system of the zoo and of the reference experiments with S a sum of entropies). The
 #: entropies' share of the energy gradient (``temperature_share``) is reported, not warned
 #: on: a true system has it as low as 2.6e-4 (the spinning satellite).
-NEGATIVE_TEMPERATURES = 0.01
+NEGATIVE_TEMPERATURES = _LIMITS.negative_temperatures
 
 
 def temperature_warnings(metrics: dict) -> list[str]:
@@ -42,13 +47,13 @@ def temperature_warnings(metrics: dict) -> list[str]:
 #: Below this share of the motion driven by L grad E (``reversible_share``), train and
 #: evaluate warn. Every true system of the zoo and of the reference experiments with L != 0
 #: has 0.68 or more.
-REVERSIBLE_SHARE = 0.01
+REVERSIBLE_SHARE = _LIMITS.reversible_share
 
 
 #: Above this fraction of rollout states where the model's own flow decreases its learned
 #: entropy (``entropy_production_negative_fraction``), train and evaluate warn. A GENERIC
 #: model has none: its entropy production is grad S . M grad S >= 0.
-NEGATIVE_PRODUCTION = 0.01
+NEGATIVE_PRODUCTION = _LIMITS.entropy_production
 
 
 def structure_warnings(metrics: dict) -> list[str]:
