@@ -89,7 +89,7 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
                    f"energy, entropy, friction (default {d.features_for})")
     g.add_argument("--scheme", help=_scheme_help("training residual scheme: ",
-                                                         f"default {RunConfig().scheme}"))
+                                                         f"default {d.scheme}"))
     w = p.add_argument_group("loss weights and optimisation")
     w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
     w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,
