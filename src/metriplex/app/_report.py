@@ -1,9 +1,12 @@
 """The report figures of a model on data: rollouts against the data, rollout errors, the
-pair residuals and the learned E and S; what ``train`` and ``evaluate`` write to
-``figures/`` (public as :func:`metriplex.runs.report_figures`)."""
+pair residuals and the learned E and S; what ``train``, ``evaluate`` and ``reproduce`` write
+to ``figures/`` (public as :func:`metriplex.runs.report_figures`). Where the data come from a
+known model (the reference experiments), a :class:`Truth` adds its curves to the same
+figures."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -19,30 +22,48 @@ from ..diagnostics import error_over_time, rollout_data
 
 if TYPE_CHECKING:
     from .._model import GenericModel
-    from ..integrate import Rollout
+    from ..integrate import AbstractScheme, Rollout
 
 
-def report_figures(model: GenericModel, data: Trajectories, folder: Path, *, scheme: str = "cn",
-                   k: int = 0, solver: str | None = None,
+@dataclasses.dataclass(frozen=True)
+class Truth:
+    """What the report draws beside the learned model when the data come from a known model,
+    for the report's trajectory ``k``: the true model's own rollout error under a reference
+    scheme at the data's step (``reference_error``, shape ``(T,)``, named by
+    ``reference_label``), and the true E and S along the data after their best affine fit to the
+    learned ones (``energy``, ``entropy``, shape ``(T,)``; ``None`` where unknown). The data
+    are then labelled ``data_label``."""
+
+    reference_error: np.ndarray | None = None
+    reference_label: str = "ground truth"
+    energy: np.ndarray | None = None
+    entropy: np.ndarray | None = None
+    data_label: str = "true"
+
+
+def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
+                   scheme: str | AbstractScheme = "cn", k: int = 0, solver: str | None = None,
                    rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
-                   progress: bool = False) -> None:
+                   truth: Truth | None = None, progress: bool = False) -> None:
     """The report figure set: every trajectory's rollout error over time (failed rollouts
     marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
     over time, and the learned E and S along the rollout (each marks where the rollout failed,
     if it did). Residuals are in the data's rate units (data scale / time scale).
-    ``rollout``: what :func:`~metriplex.diagnostics.rollout_data` returned for this model, data
-    and scheme, to reuse. ``progress``: a bar over the four figures (large data take a while
-    to draw)."""
+    ``scheme``: a scheme, or its command-line name (with ``solver``). ``rollout``: what
+    :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
+    reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
+    ``progress``: a bar over the four figures (large data take a while to draw)."""
     from tqdm.auto import tqdm
 
-    sch = scheme_from_name(scheme, solver=solver)
+    sch = scheme_from_name(scheme, solver=solver) if isinstance(scheme, str) else scheme
     out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
     with tqdm(total=4, disable=not progress, desc="figures", unit="figure", leave=False) as bar:
-        _draw_report(model, data, folder, sch, k, out, xs, lengths, bar)
+        _draw_report(model, data, folder, sch, k, out, xs, lengths, truth or Truth(
+            data_label="observed"), bar)
 
 
-def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
+def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, bar) -> None:
     all_ts = np.asarray(out.ts, dtype=np.float64)
     all_pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
@@ -50,7 +71,8 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
     ts, pred, obs = all_ts[k, :T], all_pred[k, :T], xs[k, :T]
     failed_at = float(ts[min(int(failed[k]), T - 1)]) if failed[k] >= 0 else None
     names = list(data.names)
-    plots.save_figure(plots.trajectories(ts, pred, obs, names, failed_at=failed_at),
+    plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label=truth.data_label,
+                                         failed_at=failed_at),
                       folder / "trajectories", t=ts, learned=pred, observed=obs,
                       names=np.array(names), failed_step=failed[k])
     bar.update()
@@ -60,12 +82,15 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
         errors[j, :Tj] = error_over_time(all_pred[j, :Tj], xs[j, :Tj])
     scale = state_scale(data.x)
     per_var = np.abs(pred - obs) / scale[None, :]
+    reference = ({} if truth.reference_error is None
+                 else {"reference_error": truth.reference_error})
     plots.save_figure(
         plots.rollout_errors(all_ts, errors, failed_step=failed,
                              per_variable=dict(zip(names, per_var.T)), trajectory=k,
-                             ids=list(data.ids)),
+                             ids=list(data.ids), reference=truth.reference_error,
+                             reference_label=truth.reference_label),
         folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
-        error_per_variable=per_var, names=np.array(names))
+        error_per_variable=per_var, names=np.array(names), **reference)
     bar.update()
     # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
     rate = scale / time_scale(data, scale)
@@ -79,8 +104,11 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, bar) -> None:
     bar.update()
     xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
     E, S = (np.asarray(v, dtype=np.float64) for v in _potentials(model, xp))
-    plots.save_figure(plots.energy_entropy(ts, E, S, failed_at=failed_at),
-                      folder / "energy_entropy", t=ts, energy=E, entropy=S)
+    fitted = {name: v for name, v in (("energy_true_fitted", truth.energy),
+                                      ("entropy_true_fitted", truth.entropy)) if v is not None}
+    plots.save_figure(plots.energy_entropy(ts, E, S, E_true=truth.energy, S_true=truth.entropy,
+                                           failed_at=failed_at),
+                      folder / "energy_entropy", t=ts, energy=E, entropy=S, **fitted)
     bar.update()
 
 

@@ -300,13 +300,16 @@ def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | 
 def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike | None = None,
                    per_variable: dict[str, np.ndarray] | None = None,
                    trajectory: int | None = None, ids: Sequence[int] | None = None,
+                   reference: ArrayLike | None = None, reference_label: str = "ground truth",
                    max_labels: int = MAX_LABELS) -> Figure:
     """Rollout errors of every trajectory, and per variable of one, against time (log scale).
 
     ``ts``, ``errors``: ``(K, T)`` arrays (padded; NaN where a rollout stopped or a trajectory
     ended); ``failed_step``: ``(K,)``, the step at which each rollout failed, or -1. Left: each
     trajectory's relative error, a failed one marked with an ``x`` at its last state before
-    the failure, and the title says how many failed. Right (with ``per_variable``, a dict of
+    the failure, and the title says how many failed; ``reference``: a ``(T,)`` error to compare
+    trajectory ``trajectory``'s with (e.g. the true model's under the same scheme), dashed and
+    named ``reference_label``. Right (with ``per_variable``, a dict of
     ``(T,)`` errors of trajectory ``trajectory``): each variable's error, the ``max_labels``
     largest named in a legend outside the axes. Only finite positive values are drawn, errors
     above :data:`ERROR_CEILING` at it."""
@@ -333,6 +336,12 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
             ax.plot([x], [y], "x", color="C3", ms=8, mew=2,
                     label="rollout failed here" if n_failed and k == int(np.argmax(failed >= 0))
                     else None)
+    if reference is not None:
+        k = trajectory if trajectory is not None else 0
+        r = _positive(np.asarray(reference, dtype=np.float64), ERROR_CEILING)
+        ax.semilogy(ts[k, :len(r)], r, color="0.2", ls="--", lw=1.2,
+                    label=f"{reference_label}, trajectory {k if ids is None else ids[k]}")
+        drawn.append(r)
     if n_failed < K:
         ax.plot([], [], color="C0", lw=0.7, label="completed rollouts")
     if n_failed:

@@ -37,6 +37,7 @@ from ...diagnostics import potential_along, error_over_time, evaluate, rollout_d
 from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
+from .._report import Truth, report_figures
 from ..runs import train_run
 
 
@@ -161,8 +162,8 @@ def run_experiment(
     )
     untrained = _untrained_error(config, train, test, scheme, horizon)
     metrics["untrained_rollout_error"] = untrained
-    metrics.update(_figures_and_gauge(exp, system, model, test, out / "figures", rollout,
-                                      truth_rollout))
+    metrics.update(_figures_and_gauge(exp, system, model, test, out / "figures", scheme,
+                                      rollout, truth_rollout))
     metrics["bars"] = {
         k: {"target": v, "value": metrics.get(k), "met": _met(k, metrics.get(k), v)}
         for k, v in exp.bars.items()
@@ -243,24 +244,20 @@ def _energy_drifts(system, model, out, xs, lengths, fit) -> dict[str, float]:
             "true_energy_relative_drift": float(np.max(true))}
 
 
-def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
+def _figures_and_gauge(exp, system, model, test, folder: Path, scheme, rollout,
                        truth_rollout) -> dict[str, Any]:
     """The figures, the energy and entropy gauge fits and the gauge-fixed drifts, from the
-    learned model's and the truth's test rollouts (what ``rollout_data`` returned)."""
+    learned model's and the truth's test rollouts (what ``rollout_data`` returned): the report
+    figures of ``train`` and ``evaluate`` with the truth's curves in them
+    (:func:`~metriplex.runs.report_figures`), and the figures only a known model allows (the
+    gauge fits; the pendulum's positions)."""
     out, xs, lengths = rollout
     k = 0
     T = int(lengths[k])
     ts = np.asarray(out.ts, dtype=np.float64)[k, :T]
     pred = np.asarray(out.xs, dtype=np.float64)[k, :T]
     obs = xs[k, :T]
-    names = list(test.names)
     result: dict[str, Any] = {}
-    fail_k = int(np.asarray(out.failed_step)[k])
-    failed_at = float(ts[min(fail_k, T - 1)]) if fail_k >= 0 else None
-    plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label="true",
-                                         failed_at=failed_at),
-                      folder / "trajectories", t=ts, learned=pred, true=obs,
-                      names=np.array(names))
     if exp.system.startswith("pendulum"):
         upto = None
         if exp.horizon is not None:
@@ -275,11 +272,6 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
                           xs[j, : lengths[j]])
             for j in range(len(lengths))
         ]
-    truth_out = truth_rollout[0]
-    ref = error_over_time(np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs)
-    err = error_over_time(pred, obs)  # NaN after a failure: the figure marks it
-    plots.save_figure(plots.error_over_time(ts, err, reference=ref, failed_at=failed_at),
-                      folder / "error", t=ts, learned=err, ground_truth_cn=ref)
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
     x_all = np.asarray(test.x)
@@ -297,14 +289,12 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, rollout,
                           true=S_t, learned=S_l)
     m = test.trajectory == test.ids[k]
     fe, fs = result["energy_gauge_fit"], result.get("entropy_gauge_fit")
-    # NaN after a failure (not the potentials of a zero state).
-    E_k = potential_along(model, model.energy, pred)
-    S_k = potential_along(model, model.entropy, pred)
-    E_fit = fe["slope"] * E_t[m] + fe["offset"]
-    S_fit = None if fs is None else fs["slope"] * S_t[m] + fs["offset"]
-    plots.save_figure(plots.energy_entropy(ts, E_k, S_k, E_true=E_fit, S_true=S_fit,
-                                           failed_at=failed_at),
-                      folder / "energy_entropy", t=ts, energy=E_k, entropy=S_k,
-                      energy_true_fitted=E_fit,
-                      **({} if S_fit is None else {"entropy_true_fitted": S_fit}))
+    truth_out = truth_rollout[0]
+    truth = Truth(
+        reference_error=error_over_time(np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs),
+        reference_label="ground truth, Crank–Nicolson at the same dt",
+        energy=fe["slope"] * E_t[m] + fe["offset"],
+        entropy=None if fs is None else fs["slope"] * S_t[m] + fs["offset"],
+    )
+    report_figures(model, test, folder, scheme=scheme, k=k, rollout=rollout, truth=truth)
     return result
