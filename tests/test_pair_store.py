@@ -96,3 +96,16 @@ def test_input_noise_out_of_range_is_refused(data):
         _fit(data, input_noise=1.5)
     with pytest.raises(MetriplexError, match=r"--input-noise must be in \[0, 1\).*got -0.1"):
         validate(RunConfig(input_noise=-0.1), 3)
+
+
+def test_losses_networks_and_the_wall_agree_on_which_variables_are_constant():
+    # One column moves by 1e-10 of its size: rounding, not signal. The loss scale, the
+    # networks' input statistics and the wall read it from the same place, so they agree.
+    from metriplex.structure import Confinement
+    from metriplex.structure._mlp import data_statistics
+
+    rng = np.random.default_rng(3)
+    x = np.c_[rng.normal(size=200), 1e4 + 1e-6 * rng.normal(size=200), rng.normal(size=200)]
+    assert state_scale(x)[1] == 1.0
+    assert data_statistics(x)[1][1] == 1.0
+    assert Confinement.around(x).indices == (0, 2)

@@ -20,11 +20,19 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike, DTypeLike
 
 
-def state_scale(*parts: np.ndarray) -> np.ndarray:
-    """Per-variable standard deviation of states (arrays of shape ``(N, n)``, all ``parts``
-    taken together): the unit in which losses, residuals and errors are measured. Columns that
-    are constant (to 1e-12 of the data's magnitude) get scale 1. Computed block by block in
-    float64 (Chan's pooled update), so large float32 data need no float64 copy."""
+#: A variable whose standard deviation is at most this fraction of the data's largest magnitude
+#: (or of 1, if that is smaller) is constant: below it, the spread is rounding (float32 keeps
+#: about 7 digits), and dividing by it would turn rounding into signal.
+CONSTANT_RTOL = 1e-8
+
+
+def state_statistics(*parts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per-variable ``(mean, scale, varying)`` of states (arrays of shape ``(N, n)``, all
+    ``parts`` taken together): ``scale`` is the standard deviation, the unit in which losses,
+    residuals, errors and network inputs are measured, and 1 where the variable is constant
+    (``varying`` False; :data:`CONSTANT_RTOL`). The one place where the data's scales are
+    computed. Block by block in float64 (Chan's pooled update), so large float32 data need no
+    float64 copy."""
     rows = 1 << 16
     count, mean, m2, peak = 0, 0.0, 0.0, 0.0
     for part in parts:
@@ -39,7 +47,14 @@ def state_scale(*parts: np.ndarray) -> np.ndarray:
             count += k
             peak = max(peak, float(np.abs(block).max()))
     s = np.sqrt(m2 / count)
-    return np.where(s > 1e-12 * max(peak, 1.0), s, 1.0)
+    varying = s > CONSTANT_RTOL * max(peak, 1.0)
+    return np.asarray(mean, dtype=np.float64), np.where(varying, s, 1.0), varying
+
+
+def state_scale(*parts: np.ndarray) -> np.ndarray:
+    """Per-variable standard deviation of states, 1 for constant variables: the ``scale`` of
+    :func:`state_statistics`."""
+    return state_statistics(*parts)[1]
 
 
 def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -> float:

@@ -18,6 +18,7 @@ import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
+from ..data import state_statistics
 from .._types import Matrix
 
 @jax.custom_jvp
@@ -108,13 +109,10 @@ def network_spec(kind: str, hidden: Hidden, **entries: Any) -> dict[str, Any]:
 
 
 def data_statistics(z: np.ndarray) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """Mean and standard deviation per column, with a floor so constant columns stay finite."""
-    z = np.asarray(z, dtype=np.float64)
-    mean = z.mean(axis=0)
-    std = z.std(axis=0)
-    floor = 1e-8 * max(float(np.abs(z).max()), 1.0)
-    std = np.where(std > floor, std, 1.0)
-    return tuple(float(v) for v in mean), tuple(float(v) for v in std)
+    """Mean and scale per column (:func:`metriplex.data.state_statistics`: constant columns get
+    scale 1), as the static tuples a block keeps."""
+    mean, scale, _ = state_statistics(z)
+    return tuple(float(v) for v in mean), tuple(float(v) for v in scale)
 
 
 @functools.lru_cache(maxsize=None)

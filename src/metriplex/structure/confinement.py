@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import MetriplexError
+from ..data import state_statistics
 from .._types import Scalar, State
 
 if TYPE_CHECKING:
@@ -67,9 +68,9 @@ class Confinement(eqx.Module):
         if not (np.isfinite(margin) and margin >= 0):
             raise MetriplexError(f"the wall's margin must be finite and >= 0; got {margin}.")
         x = np.asarray(data, dtype=np.float64)
-        low, high, std = x.min(axis=0), x.max(axis=0), x.std(axis=0)
-        floor = 1e-8 * max(float(np.abs(x).max()), 1.0)
-        keep = list(np.nonzero(std > floor)[0])
+        low, high = x.min(axis=0), x.max(axis=0)
+        _, std, varying = state_statistics(x)
+        keep = list(np.nonzero(varying)[0])
         return cls(tuple(int(i) for i in keep), tuple(low[keep] - margin * std[keep]),
                    tuple(high[keep] + margin * std[keep]), tuple(std[keep]))
 
