@@ -137,7 +137,7 @@ def test_the_scan_sees_the_package():
         names |= {f"{path.stem}.{n.name}" for n in ast.walk(tree)
                   if isinstance(n, _Function) and _is_public(n.name)}
     assert {"train.fit", "_model.terms", "_train.make_chunk", "cli.main",
-            "potential.__init__", "plots.save_figure"} <= names
+            "potential.__init__", "_layout.save_figure"} <= names
     assert len(names) > 300
 
 

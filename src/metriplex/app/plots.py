@@ -5,7 +5,6 @@ calls ``plt.show()``. :func:`save_figure` writes PNG and PDF with the raw number
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
 
 import matplotlib
@@ -14,7 +13,8 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ._layout import lay_out_once  # noqa: E402
+from ._layout import SAVE_DPI as SAVE_DPI  # noqa: E402
+from ._layout import save_figure as save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -22,39 +22,6 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
     from .._train import History
-
-
-#: The resolution of the PNGs (the PDFs are vector graphics).
-SAVE_DPI = 150
-
-
-def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
-    """Write ``stem.png``, ``stem.pdf`` and the raw data ``stem.npz``; return the paths."""
-    from ..io import atomic_write
-
-    stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    paths = []
-    lay_out_once(fig, SAVE_DPI)
-    for ext in ("png", "pdf"):
-        p = stem.with_suffix(f".{ext}")
-        with atomic_write(p, "wb") as f:
-            # No bbox_inches="tight": the constrained layout already fits every label and
-            # outside legend in the canvas, and a tight box would draw each figure once more
-            # to measure it (a fifth of the report's time after training, #16).
-            fig.savefig(f, format=ext, dpi=SAVE_DPI)
-        paths.append(p)
-    if raw:
-        import io as _io
-
-        buf = _io.BytesIO()
-        np.savez(buf, **{k: np.asarray(v) for k, v in raw.items()})
-        p = stem.with_suffix(".npz")
-        with atomic_write(p, "wb") as f:
-            f.write(buf.getvalue())
-        paths.append(p)
-    plt.close(fig)
-    return paths
 
 
 def _axes(ax, figsize=(6, 4)):
