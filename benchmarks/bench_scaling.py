@@ -72,7 +72,7 @@ import numpy as np  # noqa: E402
 # does not, so neither does this benchmark (index and PRNG arrays stay 32-bit, as in training).
 jax.config.update("jax_enable_x64", False)
 
-from metriplex._build import build_loss, build_model, units_for  # noqa: E402
+from metriplex.app._build import build_loss, build_model, units_for  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex._pairs import PairRows, PairStore  # noqa: E402
 from metriplex._train import adjustable_optimizer, make_chunk  # noqa: E402

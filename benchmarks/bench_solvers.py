@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 
 import metriplex as mx  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
-from metriplex._build import build_model  # noqa: E402
+from metriplex.app._build import build_model  # noqa: E402
 from metriplex.config import preset  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
 

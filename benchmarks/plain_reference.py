@@ -163,7 +163,7 @@ import optax  # noqa: E402
 
 from metriplex.app._commands import _config_from_args  # noqa: E402
 from metriplex.cli import build_parser  # noqa: E402
-from metriplex._build import build_loss, build_model, units_for  # noqa: E402
+from metriplex.app._build import build_loss, build_model, units_for  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
 from metriplex.io import read, write  # noqa: E402
 from metriplex.losses import Batch  # noqa: E402

@@ -68,7 +68,7 @@ import numpy as np  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # float64 rows; float32 rows cast explicitly
 
 import metriplex as mx  # noqa: E402
-from metriplex._build import build_loss, build_model  # noqa: E402
+from metriplex.app._build import build_loss, build_model  # noqa: E402
 from metriplex.config import RunConfig, preset, scheme_from_name  # noqa: E402
 from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402

@@ -7,7 +7,7 @@ import pytest
 import scipy.io
 
 import metriplex as mx
-from metriplex._build import build_model
+from metriplex.app._build import build_model
 from metriplex.config import RunConfig, validate
 from helpers import damped_oscillator, make_data, oscillator_x0
 

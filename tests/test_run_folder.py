@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 import metriplex as mx
-from metriplex import _lock
-from metriplex._lock import LOCK_NAME, RunFolderInUse, RunLock
+from metriplex.app import _lock
+from metriplex.app._lock import LOCK_NAME, RunFolderInUse, RunLock
 from metriplex.cli import main
 
 posix_only = pytest.mark.skipif(os.name != "posix", reason="POSIX locks and signals")
@@ -48,7 +48,7 @@ def data_file(folder):
 
 HOLDER = """
 import os, signal, sys
-from metriplex._lock import RunLock
+from metriplex.app._lock import RunLock
 RunLock(sys.argv[1]).acquire()
 print("holding", flush=True)
 sys.stdin.readline()

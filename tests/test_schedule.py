@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import pytest
 
 from metriplex._errors import MetriplexError
-from metriplex._build import stopping_for
+from metriplex.app._build import stopping_for
 from metriplex.config import SCHEDULES, RunConfig, validate
 from metriplex.runs import train_run
 from metriplex.train import Plateau

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import metriplex as mx
-from metriplex._build import build_loss, build_model, units_for
+from metriplex.app._build import build_loss, build_model, units_for
 from metriplex.config import RunConfig
 from metriplex.data import time_scale
 from helpers import damped_oscillator, make_data, oscillator_x0
