@@ -93,7 +93,7 @@ def test_a_masked_block_is_saved_and_loaded(tmp_path):
     mx.save(tmp_path / "m.mpx", model, n=3)
     back = mx.load(tmp_path / "m.mpx")
     assert back.spec() == model.spec() and back.poisson.constant == (0,)
-    assert model.spec()["poisson"]["base"]["kind"] == "mlp"
+    assert model.spec()["poisson"]["base"]["kind"] == "neural"
     x = jnp.asarray([0.3, -1.0, 0.5])
     np.testing.assert_array_equal(back.vector_field(x), model.vector_field(x))
 

@@ -309,11 +309,33 @@ def _predict(model, n):
     return np.asarray(_fields(model, _states(n, 32, 40)))
 
 
+def test_model_files_that_call_the_networks_mlp_still_load(tmp_path):
+    # Files written before the network blocks took the command line's name ("neural") say
+    # "mlp" and "projected-mlp"; they load as the same blocks, with the same predictions.
+    model = mx.GenericModel(
+        energy=MLPPotential(N, width=8, key=jr.key(1)),
+        entropy=MLPPotential(N, width=8, key=jr.key(2)),
+        poisson=mx.MaskedPoisson(ProjectedSkewMLPPoisson(N, width=8, key=jr.key(3)), (1,)),
+        friction=CholeskyFriction(N, width=8, key=jr.key(4)),
+    )
+    path = tmp_path / "new.mpx"
+    mx.save(path, model, n=N)
+    raw = path.read_bytes()
+    head, rest = raw.split(b"\n", 1)[0], raw.split(b"\n", 1)[1]
+    header, leaves = rest.split(b"\n", 1)
+    assert b'"neural"' in header and b'"projected-neural"' in header
+    old = header.replace(b'"projected-neural"', b'"projected-mlp"').replace(b'"neural"', b'"mlp"')
+    (tmp_path / "old.mpx").write_bytes(head + b"\n" + old + b"\n" + leaves)
+    back = mx.load(tmp_path / "old.mpx")
+    assert back.spec() == model.spec()
+    assert np.array_equal(_predict(back, N), _predict(model, N))
+
+
 def test_save_load_round_trip(tmp_path):
-    assert REGISTRY["poisson"]["projected-mlp"] is ProjectedSkewMLPPoisson
+    assert REGISTRY["poisson"]["projected-neural"] is ProjectedSkewMLPPoisson
     assert REGISTRY["poisson"]["casimir3"] is CasimirPoisson3
     assert REGISTRY["poisson"]["casimir3-entropy"] is EntropyCasimirPoisson3
-    assert REGISTRY["friction"]["projected-mlp"] is ProjectedCholeskyFriction
+    assert REGISTRY["friction"]["projected-neural"] is ProjectedCholeskyFriction
     expected = {}
     for name, model in _all_models().items():
         n = model.poisson.n

@@ -94,7 +94,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     exact_L, exact_M = exact_blocks(config)
     poisson = _known_poisson(config, n)
     if config.poisson == "neural":
-        spec = {"kind": "projected-mlp" if exact_L else "mlp", **net,
+        spec = {"kind": "projected-neural" if exact_L else "neural", **net,
                 "scaling": poisson_scaling.to_json()}
         poisson = _registry.from_spec("poisson", spec, n, key=kL)
     elif config.poisson == "casimir3":

@@ -90,7 +90,7 @@ class AbstractProjected(eqx.Module):
         )
 
     def spec(self) -> dict[str, Any]:
-        return {**self.base.spec(), "kind": "projected-mlp", "eps": self.eps}
+        return {**self.base.spec(), "kind": "projected-neural", "eps": self.eps}
 
     @classmethod
     def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Self:

@@ -26,8 +26,13 @@ def register(family: str, kind: str) -> Callable[[_T], _T]:
     return wrap
 
 
+#: Kinds that model files written before a block was renamed still carry: the network blocks
+#: were ``mlp`` in files, ``neural`` on the command line; both now say ``neural``.
+RENAMED = {"mlp": "neural", "projected-mlp": "projected-neural"}
+
+
 def from_spec(family: str, spec: dict[str, Any], n: int, *, key: jax.Array) -> Any:
-    kind = spec.get("kind")
+    kind = RENAMED.get(spec.get("kind"), spec.get("kind"))
     table = REGISTRY[family]
     if kind not in table:
         raise MetriplexError(

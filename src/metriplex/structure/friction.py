@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
-@register("friction", "mlp")
+@register("friction", "neural")
 class CholeskyFriction(AbstractFriction):
     r"""Learned :math:`M(x) = B(x)B(x)^\top` with :math:`B` lower-triangular.
 
@@ -97,7 +97,7 @@ class CholeskyFriction(AbstractFriction):
 
     def spec(self) -> dict[str, Any]:
         return network_spec(
-            "mlp", self.hidden,
+            "neural", self.hidden,
             scaling=scaling_spec(self.scaling),
             features=None if self.features is None else self.features.to_json(),
             input_stats=None if self.input_stats is None else [list(v) for v in
@@ -137,7 +137,7 @@ class KnownFriction(AbstractFunctionMatrix, AbstractFriction):
 # -- exactly degenerate variant ----------------------------------------------------------------
 
 
-@register("friction", "projected-mlp")
+@register("friction", "projected-neural")
 class ProjectedCholeskyFriction(AbstractProjected, AbstractFriction):
     r"""Learned :math:`M` with :math:`M\nabla E = 0` by construction: :math:`M = F F^\top`,
     :math:`F = Q B`.

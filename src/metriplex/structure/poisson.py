@@ -24,7 +24,7 @@ from ._projection import AbstractProjected
 from .scaling import Scaling, scaling_spec, standardise_state
 
 
-@register("poisson", "mlp")
+@register("poisson", "neural")
 class SkewMLPPoisson(AbstractPoisson):
     r"""Learned :math:`L(x)` from exactly :math:`n(n-1)/2` network outputs.
 
@@ -61,7 +61,7 @@ class SkewMLPPoisson(AbstractPoisson):
         return self.head(self.hidden(standardise_state(x, self.scaling)))
 
     def spec(self) -> dict[str, Any]:
-        return network_spec("mlp", self.hidden, scaling=scaling_spec(self.scaling))
+        return network_spec("neural", self.hidden, scaling=scaling_spec(self.scaling))
 
     @staticmethod
     def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
@@ -134,7 +134,7 @@ class KnownPoisson(AbstractFunctionMatrix, AbstractPoisson):
 # -- exactly degenerate variant ----------------------------------------------------------------
 
 
-@register("poisson", "projected-mlp")
+@register("poisson", "projected-neural")
 class ProjectedSkewMLPPoisson(AbstractProjected, AbstractPoisson):
     r"""Learned :math:`L` with :math:`L\nabla S = 0` by construction: :math:`L = Q A Q^\top`.
 

@@ -84,7 +84,7 @@ class FeatureMap(eqx.Module):
         }
 
 
-@register("potential", "mlp")
+@register("potential", "neural")
 class MLPPotential(AbstractPotential):
     r"""A learned potential: an MLP with C^\infty activations, :math:`\mathbb R^n\to\mathbb R`.
 
@@ -169,7 +169,7 @@ class MLPPotential(AbstractPotential):
 
     def spec(self) -> dict[str, Any]:
         return network_spec(
-            "mlp", self.hidden,
+            "neural", self.hidden,
             features=None if self.features is None else self.features.to_json(),
             shift=self.shift,
             scale=self.scale,
