@@ -137,3 +137,21 @@ def test_the_command_line_way_out(short_time_vector, tmp_path):
               "--trajectories", "1-2", "--out", tmp_path / "m.json")
     assert res.returncode == 0, res.stderr
     assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == [1, 2]
+
+
+def test_dt_never_silently_replaces_times_that_the_file_has(tmp_path):
+    # A file with usable times of step 0.1: --dt 0.2 would train a model of other dynamics.
+    ids = np.repeat(np.arange(K), T)
+    x = snapshots().transpose(0, 2, 1).reshape(K * T, N)
+    data = mx.Trajectories(ids, np.tile(np.arange(T) * 0.1, K), x, ("q", "p"))
+    for name in ("d.csv", "d.npz", "d.h5", "d.mat"):
+        mx.write(tmp_path / name, data)
+        with pytest.raises(MetriplexError, match=r"--dt 0\.2 would replace the file's own "
+                           r"times, whose steps are 0\.1\. .*Leave out --dt"):
+            mx.read(tmp_path / name, dt=0.2)
+        # The same step is no contradiction.
+        np.testing.assert_allclose(mx.read(tmp_path / name, dt=0.1).t, data.t, atol=1e-12)
+    result = run("train", tmp_path / "d.csv", "--out", tmp_path / "run", "--dt", "0.2",
+                 "--steps", "1")
+    assert result.returncode == 2 and "would replace the file's own times" in result.stderr
+    assert "Traceback" not in result.stderr

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
+
+import numpy as np
 
 from .._errors import MetriplexError
 from ..data import Trajectories, check_time_step
@@ -53,9 +55,10 @@ def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
     :mod:`metriplex.io._mat`.
 
     ``dt``: give every trajectory the uniform time grid ``t = k * dt`` (``k = 0, 1, ...`` in the
-    file's order of its samples) instead of the file's own times, which are then not read (a
-    file may lack them, or hold a time vector that does not fit its snapshots). The command
-    line's ``--dt``.
+    file's order of its samples), for a file that lacks times or holds a time vector that does
+    not fit its snapshots. A file whose own times have other steps (by more than 0.1 %) is
+    refused, so that a wrong step never replaces correct times unnoticed. The command line's
+    ``--dt``.
 
     A malformed file raises :class:`MetriplexError` naming the file, the rule it breaks, the
     value found and the fix.
@@ -81,11 +84,33 @@ def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
             f"{', '.join(sorted(READERS))}."
         )
     try:
+        if dt is not None:
+            _check_own_times(path, READERS[suffix], dt)
         return READERS[suffix](path) if dt is None else READERS[suffix](path, dt=dt)
     except MetriplexError as e:
         if str(path) in str(e):
             raise
         raise MetriplexError(f"data file {str(path)!r}: {e}") from None
+
+
+def _check_own_times(path: Path, reader: Any, dt: float) -> None:
+    """Refuse ``dt`` where the file's own times are readable and have other steps: ``dt`` is
+    for files without usable times, and replacing correct ones by a wrong step would train a
+    model of other dynamics without a word. Steps equal to ``dt`` (to 0.1 %) are accepted."""
+    try:
+        own = reader(path)
+    except MetriplexError:
+        return  # no usable times (none, or a vector that does not fit): dt supplies them
+    same = own.trajectory[1:] == own.trajectory[:-1]
+    steps = np.diff(own.t)[same]
+    if len(steps) and np.max(np.abs(steps - dt)) > 1e-3 * dt:
+        lo, hi = float(np.min(steps)), float(np.max(steps))
+        found = f"{lo:.6g}" if hi - lo <= 1e-3 * abs(hi) else f"{lo:.6g} to {hi:.6g}"
+        raise MetriplexError(
+            f"--dt {dt:g} would replace the file's own times, whose steps are {found}. --dt is "
+            "for files without times (or a .mat time vector that does not fit its snapshots). "
+            "Leave out --dt to use the file's times, or convert the times in the file if they "
+            "are in another unit.")
 
 
 def write(path: str | os.PathLike, data: Trajectories) -> None:
