@@ -46,6 +46,12 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
     done = _train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                           Path("run"))
     assert "not converged" not in done and "FAILED" not in done and "NO trained" not in done
+    # After a first stage the count is the main stage's, and the line says so.
+    assert done.startswith("trained 3000 steps in 5.0 s")
+    staged = _train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
+                            Path("run"), first_stage=True)
+    assert staged.startswith("trained 3000 steps after the first stage's (L grad E alone, "
+                             "above), both in 5.0 s")
 
 
 def test_evaluate_reports_the_error_of_predicting_no_motion():

@@ -90,8 +90,11 @@ def _params(items):
     return params
 
 
-def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
-    """train's final line: how training ended, and how the held-out rollouts went."""
+def _train_summary(history, metrics: dict, seconds: float, out: Path, *,
+                   first_stage: bool = False) -> str:
+    """train's final line: how training ended, and how the held-out rollouts went.
+    ``first_stage``: a first stage ran before the main one (``--reversible-first``); its steps
+    are on the line it printed, and ``seconds`` counts both."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
@@ -114,7 +117,9 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path) -> str:
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
-    return f"trained {last} steps in {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
+    steps = (f"{last} steps after the first stage's (L grad E alone, above), both in"
+             if first_stage else f"{last} steps in")
+    return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
 def cmd_train(args: argparse.Namespace) -> int | None:
@@ -123,7 +128,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     interrupted, else ``None``."""
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
-    from .config import validate
+    from .config import reversible_first_on, validate
     from ..io import read
     from .runs import RunData, check_run_folder, evaluate_run, train_parts, write_json
 
@@ -164,7 +169,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
                                    else "training data")
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
-    print(_train_summary(history, metrics, seconds, out))
+    print(_train_summary(history, metrics, seconds, out,
+                         first_stage=reversible_first_on(config) and not args.resume))
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):

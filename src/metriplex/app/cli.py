@@ -114,8 +114,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
     w.add_argument("--weight-decay", type=float,
                    help=f"AdamW weight decay (default {d.weight_decay})")
-    w.add_argument("--steps", type=int, help=f"the most optimiser steps (default {d.steps}); "
-                   "training usually stops earlier, when the held-out rollouts stop improving")
+    w.add_argument("--steps", type=int, help=f"the most optimiser steps of each training stage "
+                   f"(default {d.steps}); training usually stops earlier, when the held-out "
+                   "rollouts stop improving")
     w.add_argument("--max-minutes", type=float, help="stop training after this many minutes "
                    "(default: no time limit)")
     w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
