@@ -96,8 +96,8 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     jac_rel = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
                        3.0 * np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
                        "jacobi_residual_relative",
-                       "(dL) L is zero at every state (L is constant or zero): the Jacobi "
-                       "identity holds exactly")
+                       "the product (dL) L of L's derivative and L is zero at every state (L "
+                       "is constant, or zero): the Jacobi identity holds exactly")
     eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
     nL_raw = np.linalg.norm(L, axis=(1, 2))
     asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL_raw, _TINY)
