@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 import metriplex as mx
+from metriplex import _progress
 from metriplex import diagnostics
 from metriplex.cli import main
 from metriplex.app.config import scheme_from_name
@@ -90,6 +91,8 @@ def files(tmp_path_factory):
 
 
 def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch):
+    # As in a terminal: every frame is drawn (the captured stderr is not one).
+    monkeypatch.setattr(_progress, "_terminal", lambda: True)
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCH_STATES", 0)
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCHES", 3)  # 6 trajectories: 2 a batch
     calls = []
@@ -120,6 +123,25 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     res = run("rollout", files / "run", files / "data.npz", "--out", tmp_path / "q.npz",
               "--quiet")
     assert res.returncode == 0 and "rollouts" not in res.stderr, res.stderr
+
+
+def test_bars_written_to_a_file_or_pipe_are_redrawn_rarely(monkeypatch):
+    # A log file or a pipe would fill with frames ten times a second: there a bar is redrawn
+    # at most every PIPED_INTERVAL seconds, unless the environment says otherwise.
+    import io as _io
+
+    monkeypatch.delenv("TQDM_MININTERVAL", raising=False)
+    monkeypatch.setattr(_progress, "_terminal", lambda: False)
+    buf = _io.StringIO()
+    with _progress.progress_bar(total=1000, file=buf) as bar:
+        for _ in range(1000):
+            bar.update(1)
+    assert bar.mininterval == _progress.PIPED_INTERVAL and buf.getvalue().count("\r") <= 3
+    monkeypatch.setattr(_progress, "_terminal", lambda: True)
+    assert _progress.progress_bar(total=1, file=_io.StringIO()).mininterval < 1
+    monkeypatch.setattr(_progress, "_terminal", lambda: False)
+    monkeypatch.setenv("TQDM_MININTERVAL", "0.5")
+    assert _progress.progress_bar(total=1, file=_io.StringIO()).mininterval < 1
 
 
 @pytest.mark.parametrize("quiet", [False, True])

@@ -136,7 +136,12 @@ def nothing_written(folder):
         (["--steps", "abc"], r"argument --steps: invalid int value: 'abc'\. See `metriplex "
          r"train --help`", ("usage:",)),
         (["--lr"], r"argument --lr: expected one argument", ("usage:",)),
-        (["--no-such-option"], r"unrecognized arguments: --no-such-option", ("usage:",)),
+        (["--no-such-option"], r"metriplex train: error: unrecognized arguments: "
+         r"--no-such-option\. See `metriplex train --help`", ("usage:", "did you mean")),
+        # a typo: the command's closest option is named
+        (["--entorpy", "sum:2"], r"metriplex train: error: unrecognized arguments: --entorpy "
+         r"sum:2 \(--entorpy is not an option; did you mean --entropy\?\)\. See `metriplex "
+         r"train --help`", ("usage:",)),
     ],
 )
 def test_train_options(files, tmp_path, options, pattern, absent):

@@ -17,7 +17,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
-from tqdm.auto import tqdm
 
 from ._errors import TrainingDiverged
 from ._interrupt import CtrlC
@@ -30,6 +29,7 @@ from ._train import (
     spread,
     with_learning_rate,
 )
+from ._progress import progress_bar
 from ._validate import rollout_score
 
 if TYPE_CHECKING:
@@ -233,8 +233,8 @@ class FitLoop:
                                 ev.loss.window_shape)
         state.params = state.best_params
         opt_state = solver.init(state.params)
-        self.bar = tqdm(total=total, disable=not self.progress, desc="L-BFGS", unit="it",
-                        leave=False)
+        self.bar = progress_bar(total=total, disable=not self.progress, desc="L-BFGS",
+                                unit="it", leave=False)
         done = 0
         try:
             while done < total:
@@ -264,8 +264,8 @@ class FitLoop:
         state, history = self.state, self.history
         self.start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
         evaluations = 0
-        self.bar = tqdm(total=self.steps, initial=state.done, disable=not self.progress,
-                        desc="fit", unit="step", leave=False)
+        self.bar = progress_bar(total=self.steps, initial=state.done,
+                                disable=not self.progress, desc="fit", unit="step", leave=False)
         with CtrlC() as ctrl_c:
             try:
                 finished = resume and (

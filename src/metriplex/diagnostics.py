@@ -34,6 +34,7 @@ from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
+from ._progress import progress_bar
 
 _TINY = 1e-300
 
@@ -64,11 +65,9 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
         out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme,
                     retry=retry)
         return out, xs, lengths
-    from tqdm.auto import tqdm
-
     parts = []
-    with tqdm(total=K, disable=not progress, desc="rollouts", unit="trajectory",
-              leave=False) as bar:
+    with progress_bar(total=K, disable=not progress, desc="rollouts", unit="trajectory",
+                      leave=False) as bar:
         for a in range(0, K, size):
             b = min(a + size, K)
             x0, grid = xs[a:b, 0], ts[a:b]
@@ -128,15 +127,14 @@ def evaluate(
     report["rollout_error_mean"]
     ```
     """
-    from tqdm.auto import tqdm
-
+    
     scheme = CrankNicolson() if scheme is None else scheme
     if rollout is None:
         rollout = rollout_data(model, data, scheme=scheme, progress=progress)
     # What follows the rollouts takes seconds on large data (compiles, every predicted state
     # through E and S): one bar over its phases.
-    bar = tqdm(total=3 if step_check else 2, disable=not progress, desc="diagnostics",
-               unit="phase", leave=False)
+    bar = progress_bar(total=3 if step_check else 2, disable=not progress,
+                       desc="diagnostics", unit="phase", leave=False)
     bar.set_postfix_str("energy and entropy along the rollouts")
     out, xs, lengths = rollout
     pred = np.asarray(out.xs, dtype=np.float64)

@@ -19,6 +19,7 @@ from . import plots
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import error_over_time, rollout_data
+from .._progress import progress_bar
 
 if TYPE_CHECKING:
     from .._model import GenericModel
@@ -54,11 +55,10 @@ def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
     :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
     reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
     ``progress``: a bar over the four figures (large data take a while to draw)."""
-    from tqdm.auto import tqdm
-
     sch = scheme_from_name(scheme, solver=solver) if isinstance(scheme, str) else scheme
     out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
-    with tqdm(total=4, disable=not progress, desc="figures", unit="figure", leave=False) as bar:
+    with progress_bar(total=4, disable=not progress, desc="figures", unit="figure",
+                      leave=False) as bar:
         _draw_report(model, data, folder, sch, k, out, xs, lengths, truth or Truth(
             data_label="observed"), bar)
 

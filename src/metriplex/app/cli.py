@@ -8,6 +8,7 @@ Here: the parser (every option and its help) and ``main``; what each command doe
 from __future__ import annotations
 
 import argparse
+import difflib
 import re
 import sys
 from typing import Any, NoReturn
@@ -54,6 +55,17 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}. See `{self.prog} --help`.\n")
+
+    def unrecognised(self, command: str, extra: list[str]) -> NoReturn:
+        """The error for options that ``command`` does not have, from that command's parser
+        (so it points to the command's help), with the closest option it has for each."""
+        sub = getattr(self, "commands", {}).get(command, self)
+        known = sorted(set(re.findall(r"--[A-Za-z][\w-]*", sub.format_help())))
+        hints = [f"{a} is not an option; did you mean {close[0]}?" for a in extra
+                 if a.startswith("--") and (close := difflib.get_close_matches(
+                     a.split("=")[0], known, n=1, cutoff=0.7))]
+        sub.error(f"unrecognized arguments: {' '.join(extra)}"
+                  + ("" if not hints else " (" + "; ".join(hints) + ")"))
 
 
 def _add_structure_options(p: argparse.ArgumentParser) -> None:
@@ -164,6 +176,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser.commands = sub.choices  # each command's parser, by name (for its usage errors)
 
     p = sub.add_parser("generate", aliases=["simulate"],
                        help="generate trajectories of a built-in system",
@@ -338,7 +351,9 @@ def main(argv: list[str] | None = None) -> int:
     on success, 2 on bad input (one message on stderr), 130 when interrupted, or the command's own.
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        parser.unrecognised(args.command, extra)
     return_large_blocks()
     try:
         code = args.func(args)
