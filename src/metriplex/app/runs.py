@@ -25,11 +25,12 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from ._build import build_loss, build_model, constant_variables, fit_settings, units_for
+from ._build import (build_loss, build_model, constant_variables, fit_settings,
+                     stopping_for, units_for)
 from ._report import report_figures
 from ._stages import reversible_first
-from .config import (RunConfig, confine_on, reversible_first_on, scheme_from_name,
-                     temperature_weight, validate)
+from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on,
+                     scheme_from_name, temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -254,8 +255,15 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                                  max_seconds=budget)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
+    exact_L, exact_M = exact_blocks(config)
     header = {
         "config": config.to_json(),
+        # What the options left at their default (None, "auto") decided for these data, so
+        # the folder tells which stages, walls and exact blocks the run had.
+        "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
+                    "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
+                    "patience": (stopping_for(config).patience
+                                 if stopping_for(config) is not None else None)},
         "names": list(train.names),
         "n": train.n,
         "train_trajectories": [int(i) for i in train.ids],
