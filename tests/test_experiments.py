@@ -12,6 +12,7 @@ every figure and ``metrics.json``) at a tiny size, where it checks what is writt
 import json
 import math
 
+import numpy as np
 import pytest
 
 from metriplex.experiments import EXPERIMENTS, Size, run_experiment
@@ -20,7 +21,7 @@ from metriplex.experiments import EXPERIMENTS, Size, run_experiment
 # (measured margins in docs/experiments.md).
 MARGIN = 5.0
 
-FIGURES = ("trajectories", "error", "energy_fit", "energy_entropy", "loss")
+FIGURES = ("trajectories", "error", "residual", "energy_fit", "energy_entropy", "loss")
 
 
 @pytest.mark.parametrize(
@@ -85,6 +86,11 @@ def test_experiment_pipeline_writes_everything(tmp_path):
     for stem in FIGURES + ("positions",):
         for ext in ("png", "pdf", "npz"):
             assert (out / "figures" / f"{stem}.{ext}").exists(), f"{stem}.{ext}"
+    # The report figures carry the truth: its own error under Crank-Nicolson beside the
+    # learned model's (every test trajectory), and the true states under their own name.
+    error = np.load(out / "figures" / "error.npz")
+    assert error["error"].shape == (5, 21) and error["reference_error"].shape == (21,)
+    assert set(np.load(out / "figures" / "trajectories.npz")) >= {"true", "learned", "t"}
 
 
 def test_reproduce_honours_degeneracy_with_and_without_defaults():

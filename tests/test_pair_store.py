@@ -109,3 +109,8 @@ def test_losses_networks_and_the_wall_agree_on_which_variables_are_constant():
     assert state_scale(x)[1] == 1.0
     assert data_statistics(x)[1][1] == 1.0
     assert Confinement.around(x).indices == (0, 2)
+    # Each variable is judged by its own size: one in small units beside one in large units
+    # is not constant (a spread of 1e-4 next to values of 1e5).
+    y = np.c_[1e5 + 1e3 * rng.normal(size=1000), 1e-4 * rng.normal(size=1000)]
+    np.testing.assert_allclose(state_scale(y), y.std(axis=0), rtol=1e-9)
+    assert data_statistics(y)[1][1] == pytest.approx(y[:, 1].std(), rel=1e-9)

@@ -151,6 +151,17 @@ def test_dt_never_silently_replaces_times_that_the_file_has(tmp_path):
             mx.read(tmp_path / name, dt=0.2)
         # The same step is no contradiction.
         np.testing.assert_allclose(mx.read(tmp_path / name, dt=0.1).t, data.t, atol=1e-12)
+    # Uneven times whose mean step is dt are refused too; times stored in float32, whose steps
+    # wobble by their rounding, are not.
+    jitter = np.cumsum(np.random.default_rng(0).uniform(0.05, 0.15, T))
+    mx.write(tmp_path / "uneven.npz", mx.Trajectories(np.zeros(T, int), jitter - jitter[0],
+                                                       x[:T], ("q", "p")))
+    with pytest.raises(MetriplexError, match=r"whose steps are 0\.05\d* to 0\.14\d*"):
+        mx.read(tmp_path / "uneven.npz", dt=0.1)
+    many = 20_000
+    np.savez(tmp_path / "f32.npz", trajectory=np.zeros(many, int), x=np.zeros((many, 1)),
+             t=(np.arange(many) * np.float32(1e-3)).astype(np.float32))
+    assert mx.read(tmp_path / "f32.npz", dt=1e-3).t[-1] == pytest.approx(19.999)
     result = run("train", tmp_path / "d.csv", "--out", tmp_path / "run", "--dt", "0.2",
                  "--steps", "1")
     assert result.returncode == 2 and "would replace the file's own times" in result.stderr

@@ -15,16 +15,18 @@ PIPED_INTERVAL = 30.0
 
 
 def progress_bar(**kwargs: Any) -> tqdm:
-    """``tqdm(**kwargs)``, redrawn at most every :data:`PIPED_INTERVAL` s where stderr is not a
-    terminal (and neither ``mininterval`` nor ``TQDM_MININTERVAL`` is given)."""
+    """``tqdm(**kwargs)``, redrawn at most every :data:`PIPED_INTERVAL` s where its stream
+    (``file``, default stderr) is not a terminal, outside Jupyter (whose bars are widgets), and
+    neither ``mininterval`` nor ``TQDM_MININTERVAL`` is given. (A bar whose postfix changes is
+    redrawn then too.)"""
     if "mininterval" not in kwargs and "TQDM_MININTERVAL" not in os.environ \
-            and not _terminal():
+            and "ipykernel" not in sys.modules and not _terminal(kwargs.get("file")):
         kwargs["mininterval"] = PIPED_INTERVAL
     return tqdm(**kwargs)
 
 
-def _terminal() -> bool:
+def _terminal(stream: Any = None) -> bool:
     try:
-        return sys.stderr.isatty()
-    except (AttributeError, ValueError):  # replaced by an object without it, or closed
+        return (sys.stderr if stream is None else stream).isatty()
+    except (AttributeError, ValueError):  # an object without it, or a closed stream
         return False

@@ -20,9 +20,10 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike, DTypeLike
 
 
-#: A variable whose standard deviation is at most this fraction of the data's largest magnitude
-#: (or of 1, if that is smaller) is constant: below it, the spread is rounding (float32 keeps
-#: about 7 digits), and dividing by it would turn rounding into signal.
+#: A variable whose standard deviation is at most this fraction of its own largest magnitude is
+#: constant: below it, the spread is rounding (float32 keeps about 7 digits), and dividing by it
+#: would turn rounding into signal. Each variable is judged by its own size, so one in small
+#: units beside one in large units is not called constant.
 CONSTANT_RTOL = 1e-8
 
 
@@ -34,7 +35,7 @@ def state_statistics(*parts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     computed. Block by block in float64 (Chan's pooled update), so large float32 data need no
     float64 copy."""
     rows = 1 << 16
-    count, mean, m2, peak = 0, 0.0, 0.0, 0.0
+    count, mean, m2, peak = 0, 0.0, 0.0, 0.0  # peak: per variable
     for part in parts:
         part = np.asarray(part)
         for b in range(0, len(part), rows):
@@ -45,9 +46,9 @@ def state_statistics(*parts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
             mean = mean + delta * (k / (count + k))
             m2 = m2 + ((block - mu) ** 2).sum(axis=0) + delta**2 * (count * k / (count + k))
             count += k
-            peak = max(peak, float(np.abs(block).max()))
+            peak = np.maximum(peak, np.abs(block).max(axis=0))
     s = np.sqrt(m2 / count)
-    varying = s > CONSTANT_RTOL * max(peak, 1.0)
+    varying = s > CONSTANT_RTOL * peak
     return np.asarray(mean, dtype=np.float64), np.where(varying, s, 1.0), varying
 
 

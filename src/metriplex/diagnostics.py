@@ -127,7 +127,6 @@ def evaluate(
     report["rollout_error_mean"]
     ```
     """
-    
     scheme = CrankNicolson() if scheme is None else scheme
     if rollout is None:
         rollout = rollout_data(model, data, scheme=scheme, progress=progress)

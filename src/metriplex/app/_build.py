@@ -52,7 +52,7 @@ from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction
 from ..structure.lie_poisson import LiePoisson
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.confinement import Confinement
-from ..structure.potential import MLPPotential
+from ..structure.potential import FeatureMap, MLPPotential
 from ..train import Average, Plateau
 
 def units_for(config: RunConfig, data: Trajectories) -> Units:
@@ -86,6 +86,9 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                           key=kE, **net)
     entropy = _known_entropy(config, n)
     if entropy is None:
+        free = casimir_variables(config, n)
+        if free is not None:  # S a Casimir of the given L by construction
+            feats["entropy"] = FeatureMap(passthrough=free)
         entropy = MLPPotential(n, features=feats["entropy"], data=x,
                                output_scale=units.entropy, quadratic=bool(config.quadratic),
                                key=kS, **net)
@@ -115,6 +118,34 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
         if config.friction == "neural":
             friction = MaskedFriction(friction, constant)
     return GenericModel(energy, entropy, poisson, friction)
+
+
+def casimir_variables(config: RunConfig, n: int) -> tuple[int, ...] | None:
+    r"""The variables a learned S is made a function of, so that it is a Casimir of the given
+    L (:math:`L\nabla S = 0` exactly), or ``None`` to learn S of every variable.
+
+    A constant L whose rows and columns are zero on some variables and nondegenerate on the
+    others (``canonical:K`` beside extra variables, a ``file:`` L of that form) has exactly the
+    functions of those variables as Casimirs; a learned S of all of them would leave
+    :math:`L\nabla S = 0` to nothing (a given L gets no penalty), and the model's entropy could
+    fall along its own flow. Applies with ``--degeneracy auto`` or ``exact`` and no
+    ``--features`` for the entropy; ``None`` where L is learned or zero, S is given, or the
+    zero rows do not split L so (then S is learned of every variable, as before)."""
+    if (config.entropy != "neural" or config.degeneracy == "soft"
+            or config.poisson in LEARNED_POISSON or config.poisson == "zero"
+            or (config.features != "none" and "entropy" in _feature_blocks(config))):
+        return None
+    import jax.numpy as jnp
+    import numpy as np
+
+    zero = jnp.zeros(n)
+    L = np.asarray(_known_poisson(config, n)(zero, zero), dtype=np.float64)
+    free = np.flatnonzero(np.all(L == 0, axis=0) & np.all(L == 0, axis=1))
+    rest = np.setdiff1d(np.arange(n), free)
+    if len(free) == 0 or len(rest) == 0 or \
+            np.linalg.matrix_rank(L[np.ix_(rest, rest)]) < len(rest):
+        return None
+    return tuple(int(i) for i in free)
 
 
 def constant_variables(config: RunConfig, data: Trajectories, *,

@@ -33,7 +33,7 @@ class Truth:
     scheme at the data's step (``reference_error``, shape ``(T,)``, named by
     ``reference_label``), and the true E and S along the data after their best affine fit to the
     learned ones (``energy``, ``entropy``, shape ``(T,)``; ``None`` where unknown). The data
-    are then labelled ``data_label``."""
+    are then labelled ``data_label`` (in the legend and as their key in ``trajectories.npz``)."""
 
     reference_error: np.ndarray | None = None
     reference_label: str = "ground truth"
@@ -73,8 +73,8 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     names = list(data.names)
     plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label=truth.data_label,
                                          failed_at=failed_at),
-                      folder / "trajectories", t=ts, learned=pred, observed=obs,
-                      names=np.array(names), failed_step=failed[k])
+                      folder / "trajectories", t=ts, learned=pred, names=np.array(names),
+                      failed_step=failed[k], **{truth.data_label: obs})
     bar.update()
     # Errors of every trajectory: NaN after a failure (never a number standing for it).
     errors = np.full(all_pred.shape[:2], np.nan)

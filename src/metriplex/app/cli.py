@@ -52,6 +52,8 @@ class _Parser(argparse.ArgumentParser):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
+        #: each command's parser, by name (set by build_parser on the top-level parser)
+        self.commands: dict[str, argparse.ArgumentParser] = {}
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}. See `{self.prog} --help`.\n")
@@ -59,8 +61,9 @@ class _Parser(argparse.ArgumentParser):
     def unrecognised(self, command: str, extra: list[str]) -> NoReturn:
         """The error for options that ``command`` does not have, from that command's parser
         (so it points to the command's help), with the closest option it has for each."""
-        sub = getattr(self, "commands", {}).get(command, self)
-        known = sorted(set(re.findall(r"--[A-Za-z][\w-]*", sub.format_help())))
+        sub = self.commands.get(command, self)
+        # argparse lists a parser's options only in this attribute (stable since Python 2.7)
+        known = sorted(s for s in sub._option_string_actions if s.startswith("--"))
         hints = [f"{a} is not an option; did you mean {close[0]}?" for a in extra
                  if a.startswith("--") and (close := difflib.get_close_matches(
                      a.split("=")[0], known, n=1, cutoff=0.7))]

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
 from .._errors import MetriplexError
-from ..data import Trajectories, check_time_step
+from ..data import Trajectories, check_time_step, uniform_times
 from ._csv import read_csv, write_csv
 from ._hdf5 import read_hdf5, write_hdf5
 from ._mat import read_mat, write_mat
@@ -84,26 +84,29 @@ def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
             f"{', '.join(sorted(READERS))}."
         )
     try:
-        if dt is not None:
-            _check_own_times(path, READERS[suffix], dt)
-        return READERS[suffix](path) if dt is None else READERS[suffix](path, dt=dt)
+        if dt is None:
+            return READERS[suffix](path)
+        try:
+            own = READERS[suffix](path)
+        except MetriplexError:  # no usable times (none, or a vector that does not fit)
+            return READERS[suffix](path, dt=dt)
+        _check_own_steps(own, dt)
+        return Trajectories(own.trajectory, uniform_times(own.trajectory, dt), own.x, own.names)
     except MetriplexError as e:
         if str(path) in str(e):
             raise
         raise MetriplexError(f"data file {str(path)!r}: {e}") from None
 
 
-def _check_own_times(path: Path, reader: Any, dt: float) -> None:
-    """Refuse ``dt`` where the file's own times are readable and have other steps: ``dt`` is
-    for files without usable times, and replacing correct ones by a wrong step would train a
-    model of other dynamics without a word. Steps equal to ``dt`` (to 0.1 %) are accepted."""
-    try:
-        own = reader(path)
-    except MetriplexError:
-        return  # no usable times (none, or a vector that does not fit): dt supplies them
+def _check_own_steps(own: Trajectories, dt: float) -> None:
+    """Refuse ``dt`` for data whose own times have another step: ``dt`` is for files without
+    usable times, and replacing correct ones by a wrong step would train a model of other
+    dynamics without a word. Every step is compared: equal to ``dt`` within 0.1 %, or within
+    the rounding of times stored in float32 (which wobble step by step), is no contradiction."""
     same = own.trajectory[1:] == own.trajectory[:-1]
     steps = np.diff(own.t)[same]
-    if len(steps) and np.max(np.abs(steps - dt)) > 1e-3 * dt:
+    rounding = 8 * np.finfo(np.float32).eps * np.abs(own.t[1:][same])
+    if len(steps) and np.any(np.abs(steps - dt) > np.maximum(1e-3 * dt, rounding)):
         lo, hi = float(np.min(steps)), float(np.max(steps))
         found = f"{lo:.6g}" if hi - lo <= 1e-3 * abs(hi) else f"{lo:.6g} to {hi:.6g}"
         raise MetriplexError(
