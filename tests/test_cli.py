@@ -67,7 +67,8 @@ def test_run_folder_contents(oscillator_run):
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
     assert cfg["decided"] == {"confine": True, "reversible_first": True, "w_temperature": 1.0,
                               "exact_poisson_degeneracy": False,
-                              "exact_friction_degeneracy": True, "patience": 20}
+                              "exact_friction_degeneracy": True, "entropy_of": None,
+                              "patience": 20}
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
     assert not (run_dir / ".metriplex.lock").exists()
     mask = os.umask(0)

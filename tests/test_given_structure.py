@@ -82,3 +82,30 @@ def test_zoo_cases_are_registered_and_distinct_from_the_reference_systems():
         assert name not in ("rigid-body", "pendulum-energetic", "pendulum-temperature",
                             "gas-containers")
         validate(RunConfig(**dict(case.flags)), case.system.n)
+
+
+def test_a_learned_s_beside_a_given_l_is_one_of_its_casimirs(tmp_path):
+    # With L given (canonical on (q, p), or the same L from a file) and S learned, S is made a
+    # function of s alone, the variable L leaves free: L grad S = 0 holds exactly, so the
+    # model's entropy cannot fall along its own flow. --degeneracy soft learns it of all.
+    from helpers import oscillator_data
+
+    data = oscillator_data()
+    np.save(tmp_path / "L.npy", CANONICAL)
+    x = jnp.asarray(data.x[::7])
+    for poisson in ("canonical:1", f"file:{tmp_path / 'L.npy'}"):
+        config = RunConfig(poisson=poisson, width=8)
+        model = build_model(config, data, key=jr.key(0))
+        terms = [model.terms(xi) for xi in x]
+        gS = np.array([np.asarray(t.grad_entropy) for t in terms])
+        assert np.all(gS[:, :2] == 0) and np.all(gS[:, 2] != 0), poisson
+        LgS = np.array([np.asarray(t.poisson @ t.grad_entropy) for t in terms])
+        assert np.all(LgS == 0), poisson
+    soft = build_model(RunConfig(poisson="canonical:1", width=8, degeneracy="soft"), data,
+                       key=jr.key(0))
+    assert np.any(np.asarray(soft.terms(x[0]).grad_entropy)[:2] != 0)
+    # Where L's free variables are not coordinates (here none: L is nondegenerate on all),
+    # nothing changes.
+    from metriplex.app._build import casimir_variables
+    assert casimir_variables(RunConfig(poisson="canonical:2"), 4) is None
+    assert casimir_variables(RunConfig(poisson="canonical:1", entropy="sum:2"), 3) is None

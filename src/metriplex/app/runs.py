@@ -25,8 +25,8 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from ._build import (build_loss, build_model, constant_variables, fit_settings,
-                     stopping_for, units_for)
+from ._build import (build_loss, build_model, casimir_variables, constant_variables,
+                     fit_settings, stopping_for, units_for)
 from ._report import report_figures
 from ._stages import reversible_first
 from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on,
@@ -246,6 +246,11 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model_key, fit_key = jr.split(jr.key(config.seed))
     units = units_for(config, train)
     constant = constant_variables(config, train, note=sys.stderr)
+    free = casimir_variables(config, train.n)
+    if free is not None and not resume:
+        print(f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
+              "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
+              "(--degeneracy soft learns it of every variable)", file=sys.stderr)
     model = build_model(config, train, key=model_key, units=units, constant=constant)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
@@ -262,6 +267,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         # the folder tells which stages, walls and exact blocks the run had.
         "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
+                    "entropy_of": None if free is None else list(free),
                     "patience": (stopping_for(config).patience
                                  if stopping_for(config) is not None else None)},
         "names": list(train.names),
