@@ -244,9 +244,11 @@ def test_resume_refuses_other_data_or_another_split(trained, tmp_path):
             rf"'.*data\.npz' \(8 trajectories, ids 0-7; 168 rows x 3 variables; sha256 {sha}\); "
             r"this command gives '.*other\.npz' \(8 trajectories, ids 0-7; 168 rows x 3 "
             r"variables; sha256 (?!" + sha + r")[0-9a-f]{12}\)\. Resume with the same data file")
+    # Another step is refused before the resume is considered: it would replace the file's
+    # own times (a file without times, trained with --dt, resumes only with the same --dt).
     refused(run("train", data_file, "--out", trained, *same, "--trajectories", "0-5",
                 "--validation-ids", "4,5", "--dt", "0.2"),
-            r"--resume needs the data .* this command gives '.*data\.npz' with --dt 0\.2 ")
+            r"--dt 0\.2 would replace the file's own times, whose steps are 0\.1\.")
     refused(run("train", data_file, "--out", trained, *same, "--trajectories", "0-5",
                 "--validation-ids", "3,5"),
             r"--resume needs the trajectories of the interrupted run, but they differ: it "
@@ -293,3 +295,16 @@ def test_resume_compares_what_decided_options_decide():
     assert said == "it ran with --no-confine, this command gives --confine"
     learned = RunConfig()  # S learned: the wall decided off
     assert _resume_differences(dataclasses.replace(learned, confine=False), learned) == ""
+
+
+def test_resume_names_the_step_that_gave_a_file_its_times():
+    # A file without times trained with --dt 0.1 and resumed with --dt 0.2 has other data
+    # (other times): the refusal names both steps. (A file with its own times never gets
+    # that far with another step: its read refuses it.)
+    from metriplex.app.runs import _check_resume
+
+    info = {"file": "d.mat", "trajectory_ids": [0, 1], "shape": [40, 2]}
+    with pytest.raises(mx.MetriplexError, match=r"it trained on 'd\.mat' with --dt 0\.1 .*; "
+                       r"this command gives 'd\.mat' with --dt 0\.2 .*same --dt"):
+        _check_resume({"data": {**info, "dt": 0.1, "sha256": "a" * 64}},
+                      {**info, "dt": 0.2, "sha256": "b" * 64}, None, None)
