@@ -21,6 +21,7 @@ vector field would reach with that scheme) and the trivial prediction x(t) = x(0
 ```bash
 python benchmarks/published_pendulum.py                    # both stand-ins, defaults
 python benchmarks/published_pendulum.py --data dg --set scheme=discrete-gradient
+python benchmarks/published_pendulum.py --set entropy=neural  # S learned, a Casimir of L
 ```
 """
 
@@ -72,7 +73,7 @@ def constant_prediction_error(data) -> float:
 def run(kind: str, overrides: dict, workdir: Path) -> dict:
     system, data = stand_in(kind)
     train, test = data.select(list(range(40))), data.select(list(range(40, 50)))
-    config = dataclasses.replace(RunConfig(), **FLAGS, **overrides)
+    config = dataclasses.replace(RunConfig(), **{**FLAGS, **overrides})  # --set may replace a flag
     model, history, _, _, seconds = train_run(train, config, workdir / kind, overwrite=True,
                                               progress=False)
     scheme = scheme_from_name(config.scheme)
