@@ -107,5 +107,7 @@ def test_a_learned_s_beside_a_given_l_is_one_of_its_casimirs(tmp_path):
     # Where L's free variables are not coordinates (here none: L is nondegenerate on all),
     # nothing changes.
     from metriplex.app._build import casimir_variables
-    assert casimir_variables(RunConfig(poisson="canonical:2"), 4) is None
-    assert casimir_variables(RunConfig(poisson="canonical:1", entropy="sum:2"), 3) is None
+    assert casimir_variables(RunConfig(poisson="canonical:2"), mx.CanonicalPoisson(4, 2)) is None
+    assert casimir_variables(RunConfig(poisson="canonical:1", entropy="sum:2"),
+                             mx.CanonicalPoisson(3, 1)) is None
+    assert casimir_variables(RunConfig(poisson="zero"), mx.ZeroPoisson(3)) is None

@@ -84,9 +84,10 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                           quadratic=bool(config.quadratic),
                           confinement=Confinement.around(x) if confine_on(config) else None,
                           key=kE, **net)
+    poisson = _known_poisson(config, n)
     entropy = _known_entropy(config, n)
     if entropy is None:
-        free = casimir_variables(config, n)
+        free = casimir_variables(config, poisson)
         if free is not None:  # S a Casimir of the given L by construction
             feats["entropy"] = FeatureMap(passthrough=free)
         entropy = MLPPotential(n, features=feats["entropy"], data=x,
@@ -95,7 +96,6 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     poisson_scaling = units.poisson_scaling()
     friction_scaling = units.friction_scaling()
     exact_L, exact_M = exact_blocks(config)
-    poisson = _known_poisson(config, n)
     if config.poisson == "neural":
         spec = {"kind": "projected-neural" if exact_L else "neural", **net,
                 "scaling": poisson_scaling.to_json()}
@@ -120,28 +120,28 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     return GenericModel(energy, entropy, poisson, friction)
 
 
-def casimir_variables(config: RunConfig, n: int) -> tuple[int, ...] | None:
+def casimir_variables(config: RunConfig, poisson: Any) -> tuple[int, ...] | None:
     r"""The variables a learned S is made a function of, so that it is a Casimir of the given
-    L (:math:`L\nabla S = 0` exactly), or ``None`` to learn S of every variable.
+    L, the block ``poisson`` (``None`` where L is learned): :math:`L\nabla S = 0` exactly. Or
+    ``None`` to learn S of every variable.
 
     A constant L whose rows and columns are zero on some variables and nondegenerate on the
     others (``canonical:K`` beside extra variables, a ``file:`` L of that form) has exactly the
     functions of those variables as Casimirs; a learned S of all of them would leave
     :math:`L\nabla S = 0` to nothing (a given L gets no penalty), and the model's entropy could
     fall along its own flow. Applies with ``--degeneracy auto`` or ``exact`` and no
-    ``--features`` for the entropy; ``None`` where L is learned or zero, S is given, or the
-    zero rows do not split L so (then S is learned of every variable, as before)."""
-    if (config.entropy != "neural" or config.degeneracy == "soft"
-            or config.poisson in LEARNED_POISSON or config.poisson == "zero"
+    ``--features`` for the entropy; ``None`` where L is learned, S is given, or the zero rows
+    do not split L so (L = 0 among them: every function is its Casimir)."""
+    if (poisson is None or config.entropy != "neural" or config.degeneracy == "soft"
             or (config.features != "none" and "entropy" in _feature_blocks(config))):
         return None
     import jax.numpy as jnp
     import numpy as np
 
-    zero = jnp.zeros(n)
-    L = np.asarray(_known_poisson(config, n)(zero, zero), dtype=np.float64)
+    zero = jnp.zeros(poisson.n)
+    L = np.asarray(poisson(zero, zero), dtype=np.float64)
     free = np.flatnonzero(np.all(L == 0, axis=0) & np.all(L == 0, axis=1))
-    rest = np.setdiff1d(np.arange(n), free)
+    rest = np.setdiff1d(np.arange(poisson.n), free)
     if len(free) == 0 or len(rest) == 0 or \
             np.linalg.matrix_rank(L[np.ix_(rest, rest)]) < len(rest):
         return None

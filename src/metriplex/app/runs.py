@@ -29,8 +29,8 @@ from ._build import (build_loss, build_model, casimir_variables, constant_variab
                      fit_settings, stopping_for, units_for)
 from ._report import report_figures
 from ._stages import reversible_first
-from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on,
-                     scheme_from_name, temperature_weight, validate)
+from .config import (RunConfig, _known_poisson, confine_on, exact_blocks,
+                     reversible_first_on, scheme_from_name, temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -246,7 +246,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model_key, fit_key = jr.split(jr.key(config.seed))
     units = units_for(config, train)
     constant = constant_variables(config, train, note=sys.stderr)
-    free = casimir_variables(config, train.n)
+    free = casimir_variables(config, _known_poisson(config, train.n))
     if free is not None and not resume:
         print(f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
               "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
@@ -261,6 +261,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     exact_L, exact_M = exact_blocks(config)
+    stopping = stopping_for(config)
     header = {
         "config": config.to_json(),
         # What the options left at their default (None, "auto") decided for these data, so
@@ -268,8 +269,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
-                    "patience": (stopping_for(config).patience
-                                 if stopping_for(config) is not None else None)},
+                    "patience": None if stopping is None else stopping.patience},
         "names": list(train.names),
         "n": train.n,
         "train_trajectories": [int(i) for i in train.ids],
