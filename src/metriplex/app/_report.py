@@ -18,7 +18,7 @@ import numpy as np
 from . import plots
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
-from ..diagnostics import error_over_time, rollout_data
+from ..diagnostics import error_over_time, potential_along, rollout_data
 from .._progress import progress_bar
 
 if TYPE_CHECKING:
@@ -102,8 +102,8 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
                       t=tk[1:], residual=res, names=np.array(names))
     bar.update()
-    xp = jnp.asarray(pred, dtype)  # NaN after a failure: the potentials stop there too
-    E, S = (np.asarray(v, dtype=np.float64) for v in _potentials(model, xp))
+    # NaN after a failure: the potentials stop there too
+    E, S = (potential_along(model, fn, pred) for fn in (model.energy, model.entropy))
     fitted = {name: v for name, v in (("energy_true_fitted", truth.energy),
                                       ("entropy_true_fitted", truth.entropy)) if v is not None}
     plots.save_figure(plots.energy_entropy(ts, E, S, E_true=truth.energy, S_true=truth.entropy,
@@ -118,8 +118,3 @@ def _pair_residuals(model, scheme, x0, x1, dt):
     model would compile on its own)."""
     t0, t1 = jax.vmap(model.terms)(x0), jax.vmap(model.terms)(x1)
     return jax.vmap(scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(model, x0, x1, dt, t0, t1)
-
-
-@eqx.filter_jit
-def _potentials(model, xs):
-    return jax.vmap(model.energy)(xs), jax.vmap(model.entropy)(xs)
