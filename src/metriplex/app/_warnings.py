@@ -69,7 +69,9 @@ def structure_warnings(metrics: dict) -> list[str]:
                    f"states: L grad S is not zero{held}, so this S is not an entropy of the "
                    "model's flow. Where L and S are learned, L grad S = 0 is a penalty by "
                    "default and --degeneracy exact makes it exact (it can cost accuracy, see "
-                   "docs/zoo.md); where L is given, S must be one of its Casimirs.")
+                   "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
+                   "default S is then learned of the variables L leaves free, where L has "
+                   "such coordinates; not with --degeneracy soft).")
     share = metrics.get("reversible_share")
     if share is not None and share < REVERSIBLE_SHARE:
         out.append(f"warning: the learned energy drives {share:.1e} of the motion (L grad E); "
