@@ -108,7 +108,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
     test = generate(system, trajectories=case.test_trajectories, steps=case.horizon_steps,
                     dt=case.dt, seed=1000 + seed)
     gen_seconds = time.perf_counter() - t0
-    config = dataclasses.replace(RunConfig(), **dict(case.flags), **overrides)
+    config = dataclasses.replace(RunConfig(), **{**case.flags, **overrides})  # --set may replace a flag
     out = workdir / case.name
     model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
                                               progress=False)
