@@ -114,3 +114,75 @@ def test_losses_networks_and_the_wall_agree_on_which_variables_are_constant():
     y = np.c_[1e5 + 1e3 * rng.normal(size=1000), 1e-4 * rng.normal(size=1000)]
     np.testing.assert_allclose(state_scale(y), y.std(axis=0), rtol=1e-9)
     assert data_statistics(y)[1][1] == pytest.approx(y[:, 1].std(), rel=1e-9)
+
+
+def test_runs_of_consecutive_pairs_share_their_states_and_weigh_out_crossings():
+    data = _ragged()  # trajectories of 4, 5 and 2 samples, in this order
+    np.testing.assert_array_equal(data.trajectory, [1] * 4 + [3] * 5 + [7] * 2)
+    rows = PairRows.of(data, 3, "training")
+    assert rows.in_runs
+    store = PairStore.of(rows, np.ones(3), jnp.float64)
+    # Runs of 3 pairs from rows 2 (crosses from the first trajectory into the second), 0
+    # and 9 (the last two rows: past the end).
+    batch = store.take_runs(jnp.array([2, 0, 9], dtype=rows.first.dtype), 3)
+    assert batch.runs.states.shape == (3 * 4, 3)
+    x = data.x
+    expected = [(2, 3), (3, 4), (4, 5), (0, 1), (1, 2), (2, 3), (9, 10), (10, 10), (10, 10)]
+    np.testing.assert_array_equal(np.asarray(batch.x0), x[[a for a, _ in expected]])
+    np.testing.assert_array_equal(np.asarray(batch.x1), x[[b for _, b in expected]])
+    np.testing.assert_array_equal(np.asarray(batch.runs.states[batch.runs.first]),
+                                  np.asarray(batch.x0))
+    np.testing.assert_array_equal(np.asarray(batch.runs.states[batch.runs.second]),
+                                  np.asarray(batch.x1))
+    # Row 3 ends the first trajectory (3 -> 4 crosses), row 10 is the last row.
+    np.testing.assert_array_equal(np.asarray(batch.weight), [1, 0, 1, 1, 1, 1, 1, 0, 0])
+    dt = np.diff(data.t)
+    np.testing.assert_allclose(np.asarray(batch.dt),
+                               [dt[2], 1.0, dt[4], dt[0], dt[1], dt[2], dt[9], 1.0, 1.0])
+    # Ready pairs are no runs of rows.
+    x0 = np.arange(6.0).reshape(3, 2)
+    assert not PairRows.of(Pairs(x0, x0 + 1, np.ones(3)), 2, "training").in_runs
+
+
+def test_a_loss_on_runs_equals_the_loss_on_the_data_pairs_they_hold():
+    data = _ragged()
+    rows = PairRows.of(data, 3, "training")
+    store = PairStore.of(rows, np.array([1.0, 2.0, 0.5]), jnp.float64)
+    model = mx.GenericModel(
+        energy=mx.MLPPotential(3, width=8, key=jr.key(0)), entropy=mx.SumOf((2,)),
+        poisson=mx.CanonicalPoisson(3, pairs=1),
+        friction=mx.CholeskyFriction(3, width=8, key=jr.key(1)))
+    loss = mx.CrankNicolsonResidual() + 3.0 * mx.DegeneracyPenalty()
+    assert loss.reads_runs
+    runs = store.take_runs(jnp.array([2, 0], dtype=rows.first.dtype), 3)
+    total, parts = loss(model, runs)
+    # The same pairs without the crossing one, as independent pairs: the residual is theirs;
+    # the penalties, read at the states, also see the state the crossing "pair" starts from.
+    pairs = store.take(jnp.array([2, 3, 0, 1, 2]))  # pair k from row k (k < 3), k + 1 after
+    _, expected = loss(model, pairs)
+    np.testing.assert_allclose(parts["residual"], expected["residual"], rtol=1e-12)
+    assert np.isfinite(total)
+
+
+def test_fit_draws_runs_only_where_every_term_reads_them(data):
+    from typing import ClassVar
+
+    from metriplex.losses import AbstractLossTerm
+
+    class PairDifference(AbstractLossTerm):
+        name: ClassVar[str] = "difference"
+
+        def __call__(self, model, batch, ctx, key):
+            return jnp.mean((batch.x1 - batch.x0) ** 2)
+
+    assert not (mx.CrankNicolsonResidual() + PairDifference()).reads_runs
+    assert not mx.DegeneracyPenalty(at_midpoints=True).reads_runs
+    assert (mx.CrankNicolsonResidual() + mx.NegativeTemperature((2,))
+            + mx.JacobiPenalty()).reads_runs
+    _, independent = _fit(data)
+    _, runs = _fit(data, consecutive=4)
+    assert runs.train["total"][0] == independent.train["total"][0]  # step 0: untrained
+    assert runs.train["total"][-1] < 0.6 * runs.train["total"][0]  # it trains (0.52)
+    assert runs.train["total"][1:] != independent.train["total"][1:]
+    with pytest.raises(MetriplexError, match=r"consecutive must be an integer >= 1.*got 0"):
+        _fit(data, consecutive=0)

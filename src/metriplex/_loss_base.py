@@ -28,16 +28,34 @@ class Window(NamedTuple):
     mask: jax.Array
 
 
+class Runs(NamedTuple):
+    """How a batch drawn as runs of consecutive samples shares its states: the distinct
+    ``states`` ``(S, n)`` and, for every pair, the rows ``first`` and ``second`` ``(B,)`` of
+    its two states in them (the second state of one pair is the first of the next)."""
+
+    states: jax.Array
+    first: jax.Array
+    second: jax.Array
+
+
 class Batch(NamedTuple):
     """Data pairs as the loss reads them: states ``x0`` and ``x1`` ``(B, n)`` a step ``dt``
     ``(B,)`` apart, the per-component ``scale`` ``(n,)`` in which every term is measured, and
-    the :class:`Window` of a training batch when a term reads one."""
+    the :class:`Window` of a training batch when a term reads one.
+
+    Training batches drawn as runs of consecutive samples (``fit(consecutive=K)``) also carry
+    their :class:`Runs`, so the loss evaluates each state once, and a ``weight`` ``(B,)``: 0
+    where a run crosses from one trajectory into the next, so that "pair" is no pair of the
+    data (its states are data states; its difference is not a step). Terms that read pair
+    differences weigh them out; see :attr:`AbstractLossTerm.reads_runs`."""
 
     x0: jax.Array  # (B, n)
     x1: jax.Array  # (B, n)
     dt: jax.Array  # (B,)
     scale: jax.Array  # (n,) per-component data scale
     window: Window | None = None  # training batches of a loss with a RolloutWindow term
+    weight: jax.Array | None = None  # (B,) 1 for a pair of the data, 0 across trajectories
+    runs: Runs | None = None  # shared states of a batch drawn as runs
 
 
 class Context(NamedTuple):
@@ -66,6 +84,14 @@ class AbstractLossTerm(eqx.Module):
         or ``None``. A term that reads windows is left out where a batch has none (the
         evaluation subsets of pairs)."""
         return None
+
+    @property
+    def reads_runs(self) -> bool:
+        """Whether this term may be given batches drawn as runs of consecutive samples: it
+        reads only the states, or it weighs each pair by ``batch.weight`` (0 where a run
+        crosses into the next trajectory). ``False`` by default, so a term of your own gets
+        independent pairs unless it says otherwise."""
+        return False
 
     @abc.abstractmethod
     def __call__(self, model: GenericModel, batch: Batch, ctx: Context,
@@ -133,24 +159,35 @@ class Loss(eqx.Module):
             return None
         return max(w for w, _ in shapes), max(k for _, k in shapes)
 
+    @property
+    def reads_runs(self) -> bool:
+        """Whether every term may be given batches drawn as runs of consecutive samples
+        (:attr:`AbstractLossTerm.reads_runs`); :func:`~metriplex.fit` draws independent pairs
+        otherwise."""
+        return all(t.reads_runs for t in self.terms) and self.window_shape is None
+
     def __call__(self, model: GenericModel, batch: Batch, *,
                  key: jax.Array | None = None) -> tuple[jax.Array, dict[str, jax.Array]]:
         """The weighted total on ``batch`` and each term's unweighted value by name; terms that
         read windows are left out where the batch has none."""
-        # One evaluation over both states of every pair: twice-as-tall matmuls and half as
-        # many kernels as two separate vmaps (see docs/performance.md).
         # Terms nobody reads (e.g. gradients at the states when only the discrete-gradient
         # residual and midpoint penalties are used) are removed by XLA under jit.
-        B = batch.x0.shape[0]
-        both = jax.vmap(model.terms)(jnp.concatenate([batch.x0, batch.x1]))
+        if batch.runs is not None:
+            # Each state once: a run of K pairs has K + 1 states, not 2K.
+            each = jax.vmap(model.terms)(batch.runs.states)
+            terms0 = jax.tree_util.tree_map(lambda a: a[batch.runs.first], each)
+            terms1 = jax.tree_util.tree_map(lambda a: a[batch.runs.second], each)
+        else:
+            # One evaluation over both states of every pair: twice-as-tall matmuls and half
+            # as many kernels as two separate vmaps (see docs/performance.md).
+            B = batch.x0.shape[0]
+            both = jax.vmap(model.terms)(jnp.concatenate([batch.x0, batch.x1]))
+            terms0 = jax.tree_util.tree_map(lambda a: a[:B], both)
+            terms1 = jax.tree_util.tree_map(lambda a: a[B:], both)
         mid = None
         if any(t.needs_midpoints for t in self.terms):
             mid = jax.vmap(model.terms)(0.5 * (batch.x0 + batch.x1))
-        ctx = Context(
-            jax.tree_util.tree_map(lambda a: a[:B], both),
-            jax.tree_util.tree_map(lambda a: a[B:], both),
-            mid,
-        )
+        ctx = Context(terms0, terms1, mid)
         keys = jr.split(jr.key(0) if key is None else key, len(self.terms))
         parts: dict[str, jax.Array] = {}
         total = jnp.zeros((), batch.x0.dtype)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._errors import MetriplexError
 from .data import Pairs, Trajectories
-from ._loss_base import Batch, Window
+from ._loss_base import Batch, Runs, Window
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -33,6 +33,12 @@ class PairRows(NamedTuple):
     @property
     def count(self) -> int:
         return int(self.first.shape[0])
+
+    @property
+    def in_runs(self) -> bool:
+        """Whether every pair is two consecutive rows (trajectory data), so that a run of
+        rows is a run of pairs (:meth:`PairStore.take_runs`)."""
+        return bool(np.all(self.second == self.first + 1))
 
     @classmethod
     def of(cls, data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],
@@ -108,14 +114,19 @@ class PairStore(NamedTuple):
     dt: jax.Array
     scale: jax.Array
     ahead: jax.Array  # (P,) int: how many of the next pairs continue pair k's trajectory
+    step_from: jax.Array  # (N,) the dt of the pair that starts at each row, 0 where none
 
     @classmethod
     def of(cls, rows: PairRows, scale: ArrayLike, dtype: DTypeLike) -> "PairStore":
         def put(a):
             return jnp.asarray(np.asarray(a, jnp.dtype(dtype)))  # one host copy at most
 
+        step_from = np.zeros(len(rows.x), np.float64)
+        if rows.in_runs:
+            step_from[rows.first] = rows.dt
         return cls(put(rows.x), jnp.asarray(rows.first), jnp.asarray(rows.second),
-                   put(rows.dt), jnp.asarray(scale, dtype), jnp.asarray(_ahead(rows)))
+                   put(rows.dt), jnp.asarray(scale, dtype), jnp.asarray(_ahead(rows)),
+                   put(step_from))
 
     @property
     def count(self) -> int:
@@ -132,6 +143,26 @@ class PairStore(NamedTuple):
                              idx[:w].astype(self.first.dtype), k)
         return Batch(self.x[self.first[idx]], self.x[self.second[idx]], self.dt[idx],
                      self.scale, window)
+
+    def take_runs(self, start: jax.Array, pairs: int) -> Batch:
+        """Runs of ``pairs`` consecutive pairs from the rows ``start`` ``(R,)`` (data whose
+        :attr:`PairRows.in_runs`): ``R * pairs`` pairs from ``R * (pairs + 1)`` states, with
+        :class:`Runs` so the loss evaluates each state once. A "pair" that crosses into the
+        next trajectory (or past the last row) has weight 0 and a unit step. Every pair of the
+        data is in a run from any of the ``pairs`` rows up to its own, so starts drawn
+        uniformly over the rows draw each pair equally often (but the first ``pairs - 1``)."""
+        R = start.shape[0]
+        last = self.x.shape[0] - 1
+        rows = jnp.minimum(start[:, None] + jnp.arange(pairs + 1, dtype=start.dtype)[None, :],
+                           last)
+        step = self.step_from[rows[:, :-1]].reshape(-1)
+        valid = (step > 0) & (rows[:, 1:] > rows[:, :-1]).reshape(-1)
+        local = (jnp.arange(R, dtype=start.dtype)[:, None] * (pairs + 1)
+                 + jnp.arange(pairs, dtype=start.dtype)[None, :]).reshape(-1)
+        states = self.x[rows.reshape(-1)]
+        return Batch(states[local], states[local + 1], jnp.where(valid, step, 1.0).astype(
+            self.dt.dtype), self.scale, None, valid.astype(self.dt.dtype),
+            Runs(states, local, local + 1))
 
 
 def _window(xp, x, first, second, dt, ahead, start, steps: int) -> Window:

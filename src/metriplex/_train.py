@@ -151,7 +151,7 @@ def with_learning_rate(opt_state: optax.OptState, learning_rate: float) -> optax
 
 def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any, batch_size: int,
                shard: Callable[[Batch], Batch] | None = None, noise: jax.Array | None = None,
-               ) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
+               consecutive: int = 1) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
     """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
     runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
     ``full_train`` (a :class:`~metriplex._pairs.PairStore` of all training pairs), and returns
@@ -164,6 +164,11 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any,
     ``noise`` (per-variable standard deviations, or ``None``) perturbs both states of every
     pair by one Gaussian draw: the pair's difference, the target, is kept, and the field is
     asked to produce it near the data as well as on it.
+
+    ``consecutive`` > 1 draws each batch as ``batch_size // consecutive`` runs of that many
+    consecutive pairs (:meth:`~metriplex._pairs.PairStore.take_runs`; the caller checks that
+    the data and the loss allow it), so that the model is evaluated at ``consecutive + 1``
+    states per run instead of two per pair.
     """
     def loss_fn(p, batch, k):
         return loss(eqx.combine(p, static), batch, key=k)
@@ -174,8 +179,13 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any,
         def one(carry, k):
             params, opt_state = carry
             kb, kl = jr.split(k)
-            idx = jr.randint(kb, (batch_size,), 0, n_train)
-            batch = full_train.take(idx, loss.window_shape)
+            if consecutive > 1:
+                start = jr.randint(kb, (max(1, batch_size // consecutive),), 0,
+                                   full_train.x.shape[0] - 1)
+                batch = full_train.take_runs(start.astype(full_train.first.dtype), consecutive)
+            else:
+                idx = jr.randint(kb, (batch_size,), 0, n_train)
+                batch = full_train.take(idx, loss.window_shape)
             if noise is not None:
                 kn = jr.fold_in(kl, 1)
                 eps = jr.normal(kn, batch.x0.shape, batch.x0.dtype) * noise[None, :]
@@ -302,8 +312,12 @@ class TrainState:
 
 def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_rate: float,
                     patience: int | None, input_noise: float, checkpoint: Any,
-                    finish: Any, average: Any = None) -> None:
+                    finish: Any, average: Any = None, consecutive: int = 1) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
+    if isinstance(consecutive, bool) or not isinstance(consecutive, int) or consecutive < 1:
+        raise MetriplexError(
+            f"consecutive must be an integer >= 1 (pairs per run in a batch; 1 for "
+            f"independent pairs); got {consecutive!r}.")
     if steps < 0 or batch_size < 1 or eval_every < 1:
         raise MetriplexError(
             f"need steps >= 0, batch_size >= 1 and eval_every >= 1; got steps={steps}, "

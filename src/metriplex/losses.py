@@ -45,8 +45,12 @@ __all__ = ["AbstractJacobiEstimator", "AbstractLossTerm", "Batch", "Context",
            "Window", "stochastic_jacobi"]
 
 
-def _sq(v, scale):
-    return jnp.mean(jnp.sum((v / scale[None, :]) ** 2, axis=-1))
+def _sq(v, scale, weight=None):
+    per = jnp.sum((v / scale[None, :]) ** 2, axis=-1)
+    if weight is None:
+        return jnp.mean(per)
+    # where, not a product: a weighed-out "pair" across trajectories may be anything
+    return jnp.sum(jnp.where(weight > 0, weight * per, 0.0)) / jnp.maximum(jnp.sum(weight), 1)
 
 
 class SchemeResidual(AbstractLossTerm):
@@ -61,6 +65,10 @@ class SchemeResidual(AbstractLossTerm):
     name: ClassVar[str] = "residual"
 
     @property
+    def reads_runs(self) -> bool:
+        return True  # weighs each pair by batch.weight
+
+    @property
     def needs_midpoints(self) -> bool:
         # The discrete-gradient residual evaluates the model at the midpoints anyway; taking
         # those terms from the shared context lets midpoint penalties reuse them.
@@ -73,7 +81,7 @@ class SchemeResidual(AbstractLossTerm):
             r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(*args, ctx.mid)
         else:
             r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(*args)
-        return _sq(r, batch.scale)
+        return _sq(r, batch.scale, batch.weight)
 
 
 class _AbstractDegeneracy(AbstractLossTerm):
@@ -91,6 +99,12 @@ class _AbstractDegeneracy(AbstractLossTerm):
     @property
     def needs_midpoints(self) -> bool:
         return self.at_midpoints
+
+    @property
+    def reads_runs(self) -> bool:
+        # At the states: every state of a run is a data state. At the midpoints of pairs,
+        # a midpoint across two trajectories is none.
+        return not self.at_midpoints
 
     @staticmethod
     def _defect(t: Terms) -> jax.Array: ...
@@ -166,6 +180,10 @@ class NegativeTemperature(AbstractLossTerm):
 
     indices: tuple[int, ...] = eqx.field(static=True)
     name: ClassVar[str] = "temperature"
+
+    @property
+    def reads_runs(self) -> bool:
+        return True  # reads the states only
 
     def __check_init__(self):
         if not self.indices or not all(isinstance(i, int) and i >= 0 for i in self.indices):
@@ -269,6 +287,10 @@ class JacobiPenalty(AbstractLossTerm):
     estimator: AbstractJacobiEstimator = ExactJacobi()
     samples: int | None = eqx.field(static=True, default=None)
     name: ClassVar[str] = "jacobi"
+
+    @property
+    def reads_runs(self) -> bool:
+        return True  # reads the first states only
 
     def __check_init__(self):
         expect_instance(

@@ -75,6 +75,7 @@ def fit(
     data_parallel: bool = False,
     finish: LBFGSFinish | None = None,
     input_noise: float = 0.0,
+    consecutive: int = 1,
     key: jax.Array,
 ) -> tuple[AbstractModel, History]:
     r"""Learn ``model`` from trajectory data; return the best model and the training history.
@@ -144,12 +145,20 @@ def fit(
     ``input_noise``: standard deviation of Gaussian noise added to both states of every training
     pair, as a fraction of each variable's standard deviation (default 0: none).
 
+    ``consecutive``: draw each batch as ``batch_size // consecutive`` runs of that many
+    consecutive pairs, so each state is evaluated once (default 1: independent pairs). Applies
+    to trajectory data where every loss term reads such batches
+    (:attr:`~metriplex.losses.AbstractLossTerm.reads_runs`), without ``input_noise`` and
+    ``data_parallel``; elsewhere the pairs stay independent. Each step is cheaper, but a batch
+    holds fewer independent samples (docs/zoo.md).
+
     ```python
     model, history = fit(model, data, key=jr.key(0))
     ```
     """
     check_arguments(steps=steps, batch_size=batch_size, eval_every=eval_every,
                     learning_rate=learning_rate, patience=patience, input_noise=input_noise,
+                    consecutive=consecutive,
                     checkpoint=checkpoint, finish=finish, average=average)
     if stopping is not None and patience is not None:
         stopping = dataclasses.replace(stopping, patience=patience)
@@ -180,7 +189,9 @@ def fit(
     noise = None
     if input_noise > 0:
         noise = jnp.asarray(input_noise * state_scale(train_rows.x), dtype)
-    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard, noise))
+    runs = (consecutive if consecutive > 1 and train_rows.in_runs and loss.reads_runs
+            and noise is None and shard is None else 1)
+    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard, noise, runs))
 
     # Evaluations see fixed spread subsets of the pairs. The training subset carries windows
     # like the training batches (its figures are the first of the training history); the

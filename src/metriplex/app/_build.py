@@ -190,7 +190,7 @@ def fit_settings(config: RunConfig) -> dict[str, Any]:
     return dict(
         learning_rate=config.lr, weight_decay=config.weight_decay, steps=config.steps,
         batch_size=config.batch_size, eval_every=config.eval_every,
-        stopping=stopping_for(config),
+        consecutive=max(config.consecutive, 1), stopping=stopping_for(config),
         average=Average(config.average_steps) if config.average_steps else None,
     )
 

@@ -107,6 +107,7 @@ class RunConfig:
     data_parallel: bool = False
     lbfgs_steps: int = 0
     input_noise: float = 0.0
+    consecutive: int = 1
     window_steps: int = 0
     average_steps: int = 500
     w_temperature: float | None = None
@@ -268,6 +269,8 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(f"--lr-cuts must be >= 0; got {config.lr_cuts}.")
     for name, meaning in (("lbfgs_steps", "the iterations of the L-BFGS finish"),
                           ("window_steps", "the steps of the training rollouts from data states"),
+                          ("consecutive", "the consecutive pairs of each run in a training "
+                                          "batch"),
                           ("average_steps", "the optimiser steps that the running average of "
                                             "the parameters spans")):
         expect_integer(getattr(config, name), least=0, what=f"--{name.replace('_', '-')}",
