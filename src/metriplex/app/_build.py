@@ -20,13 +20,13 @@ from .config import (
     FEATURE_BLOCKS,
     FEATURES,
     JACOBI_CHOICES,
-    LEARNED_POISSON,
     RunConfig,
     _feature_blocks,
     _indices,
     _known_entropy,
     _known_friction,
     _known_poisson,
+    _spelling,
     entropy_variables,
     confine_on,
     exact_blocks,
@@ -47,12 +47,10 @@ from ..losses import (
     SchemeResidual,
     StochasticJacobi,
 )
-from ..structure import _registry
-from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction
-from ..structure.lie_poisson import LiePoisson
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.confinement import Confinement
-from ..structure.potential import FeatureMap, MLPPotential
+from ..structure.potential import FeatureMap
+from ._spellings import Learn
 from ..train import Average, Plateau
 
 def units_for(config: RunConfig, data: Trajectories) -> Units:
@@ -80,42 +78,33 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     features = FEATURES.get(config.features)
     blocks = _feature_blocks(config)
     feats = {b: features if b in blocks else None for b in FEATURE_BLOCKS}
-    energy = MLPPotential(n, features=feats["energy"], data=x, output_scale=units.energy,
-                          quadratic=bool(config.quadratic),
-                          confinement=Confinement.around(x) if confine_on(config) else None,
-                          key=kE, **net)
+    exact_L, exact_M = exact_blocks(config)
+    energy = _spelling(config.energy, "--energy").learned(Learn(
+        n, net, x, kE, output_scale=units.energy, features=feats["energy"],
+        quadratic=bool(config.quadratic),
+        confinement=Confinement.around(x) if confine_on(config) else None))
     poisson = _known_poisson(config, n)
     entropy = _known_entropy(config, n)
     if entropy is None:
         free = casimir_variables(config, poisson)
         if free is not None:  # S a Casimir of the given L by construction
             feats["entropy"] = FeatureMap(passthrough=free)
-        entropy = MLPPotential(n, features=feats["entropy"], data=x,
-                               output_scale=units.entropy, quadratic=bool(config.quadratic),
-                               key=kS, **net)
-    poisson_scaling = units.poisson_scaling()
-    friction_scaling = units.friction_scaling()
-    exact_L, exact_M = exact_blocks(config)
-    if config.poisson == "neural":
-        spec = {"kind": "projected-neural" if exact_L else "neural", **net,
-                "scaling": poisson_scaling.to_json()}
-        poisson = _registry.from_spec("poisson", spec, n, key=kL)
-    elif config.poisson == "casimir3":
-        spec = {"kind": "casimir3", **net, "scaling": poisson_scaling.to_json()}
-        poisson = _registry.from_spec("poisson", spec, n, key=kL)
-    elif config.poisson == "lie-poisson":
-        poisson = LiePoisson(n, scaling=poisson_scaling, key=kL)
-    if config.friction == "neural":
-        cls = ProjectedCholeskyFriction if exact_M else CholeskyFriction
-        friction = cls(n, **net, scaling=friction_scaling, features=feats["friction"], data=x,
-                       key=kM)
-    else:
-        friction = _known_friction(config, n)
+        entropy = _spelling(config.entropy, "--entropy").learned(Learn(
+            n, net, x, kS, output_scale=units.entropy, features=feats["entropy"],
+            quadratic=bool(config.quadratic)))
+    if poisson is None:
+        poisson = _spelling(config.poisson, "--poisson").learned(Learn(
+            n, net, x, kL, scaling=units.poisson_scaling(), exact=exact_L))
+    friction = _known_friction(config, n)
+    if friction is None:
+        friction = _spelling(config.friction, "--friction").learned(Learn(
+            n, net, x, kM, scaling=units.friction_scaling(), exact=exact_M,
+            features=feats["friction"]))
     constant = constant_variables(config, data) if constant is None else constant
     if constant:
-        if config.poisson in LEARNED_POISSON:
+        if _spelling(config.poisson, "--poisson").learned:
             poisson = MaskedPoisson(poisson, constant)
-        if config.friction == "neural":
+        if _spelling(config.friction, "--friction").learned:
             friction = MaskedFriction(friction, constant)
     return GenericModel(energy, entropy, poisson, friction)
 
@@ -210,12 +199,13 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
     if config.window_steps > 0:
         loss = loss + config.w_traj * RolloutWindow(scheme, steps=config.window_steps)
     exact_L, exact_M = exact_blocks(config)
-    learned_L = config.poisson in LEARNED_POISSON
+    learned_L = _spelling(config.poisson, "--poisson").learned is not None
+    learned_M = _spelling(config.friction, "--friction").learned is not None
     at_midpoints = _at_midpoints(config)
     if not exact_L and learned_L and config.entropy != "zero" and config.w_degeneracy_L > 0:
         loss = loss + config.w_degeneracy_L * (e / s) ** 2 * PoissonDegeneracy(
             at_midpoints=at_midpoints)
-    if not exact_M and config.friction == "neural" and config.w_degeneracy_M > 0:
+    if not exact_M and learned_M and config.w_degeneracy_M > 0:
         loss = loss + config.w_degeneracy_M * (s / e) ** 2 * FrictionDegeneracy(
             at_midpoints=at_midpoints)
     w_temperature = temperature_weight(config)

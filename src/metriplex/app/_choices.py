@@ -9,28 +9,15 @@ checks of :func:`metriplex.app.config.validate` both read these tables, which
 
 from __future__ import annotations
 
-#: What each structure option may say (the part before any ``:``), with its help text: the
-#: command line's help and ``config.validate`` both read these tables, so a new spelling is
-#: one line here plus its case where the block is built (``config._known_*``, ``_build``).
-ENERGY_CHOICES = {"neural": "neural (default)"}
-ENTROPY_CHOICES = {
-    "neural": "neural (default)",
-    "sum": "sum:I,J,... (S = sum of those components, counted from 0)",
-    "zero": "zero",
-}
-POISSON_CHOICES = {
-    "neural": "neural (default)",
-    "canonical": "canonical:K (first K positions, next K momenta)",
-    "zero": "zero",
-    "casimir3": "casimir3 (n = 3, Jacobi exact)",
-    "lie-poisson": "lie-poisson (learned, linear in the state)",
-    "file": "file:PATH (a constant L from .npy, .npz or .mat)",
-}
-FRICTION_CHOICES = {
-    "neural": "neural (default)",
-    "zero": "zero",
-    "file": "file:PATH (a constant M from .npy, .npz or .mat)",
-}
+from ._spellings import ENERGY, ENTROPY, FRICTION, POISSON
+
+#: What each structure option may say (the part before any ``:``), with its help text, read
+#: from the tables of :mod:`metriplex.app._spellings`, which also make the blocks: the command
+#: line's help and ``config.validate`` both read these, so a new spelling is one line there.
+ENERGY_CHOICES = {k: v.help for k, v in ENERGY.items()}
+ENTROPY_CHOICES = {k: v.help for k, v in ENTROPY.items()}
+POISSON_CHOICES = {k: v.help for k, v in POISSON.items()}
+FRICTION_CHOICES = {k: v.help for k, v in FRICTION.items()}
 JACOBI_CHOICES = {
     "none": "none (default)",
     "exact": "exact",

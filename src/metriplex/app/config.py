@@ -17,11 +17,7 @@ from typing import Any
 from .._errors import MetriplexError, expect_integer
 from .._solve._implicit import _AbstractImplicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
-from ..io import read_matrix
-from ..structure.constant import ConstantFriction, ConstantPoisson
-from ..structure.friction import ZeroFriction
-from ..structure.poisson import CanonicalPoisson, ZeroPoisson
-from ..structure.potential import FeatureMap, SumOf, ZeroPotential
+from ..structure.potential import FeatureMap
 
 from ._choices import (  # noqa: F401
     DEGENERACY_POINTS,
@@ -36,6 +32,8 @@ from ._choices import (  # noqa: F401
 
 from ._option import option
 from ._presets import PRESETS
+from ._spellings import SPELLINGS, Spelling
+from ._spellings import indices as _indices
 
 from ._thermal import (  # noqa: F401 (re-exported)
     DEGENERACY_MODES,
@@ -133,22 +131,6 @@ class RunConfig:
         return cls(**obj)
 
 
-def _indices(text: str, n: int, option: str) -> tuple[int, ...]:
-    try:
-        idx = tuple(int(v) for v in text.split(",") if v.strip() != "")
-    except ValueError:
-        raise MetriplexError(
-            f"{option} expects comma-separated integer indices (e.g. 8,9); got {text!r}."
-        ) from None
-    bad = [i for i in idx if not 0 <= i < n]
-    if not idx or bad:
-        raise MetriplexError(
-            f"{option} indices must lie in [0, {n - 1}] for data with {n} variables; got "
-            f"{list(idx)}. Count state columns from 0 (after `trajectory` and `t`)."
-        )
-    return idx
-
-
 def _choice(value: str, allowed: tuple[str, ...], flag: str) -> str:
     head = option(value).kind
     if head not in allowed:
@@ -186,41 +168,13 @@ def scheme_from_name(name: str, *, solver: str | None = None) -> AbstractScheme:
 
 def validate(config: RunConfig, n: int) -> None:
     """Check that every structure option fits data with ``n`` variables."""
-    _choice(config.energy, tuple(ENERGY_CHOICES), "--energy")
-    head = _choice(config.entropy, tuple(ENTROPY_CHOICES), "--entropy")
-    if head == "sum":
-        _indices(option(config.entropy).argument, n, "--entropy sum:I,J,...")
-    head = _choice(config.poisson, tuple(POISSON_CHOICES), "--poisson")
-    if head == "file":
-        _known_poisson(config, n)
-    if head == "canonical":
-        try:
-            K = int(option(config.poisson).argument)
-        except ValueError:
-            raise MetriplexError(
-                f"--poisson canonical:K needs an integer K (the number of position/momentum "
-                f"pairs); got {config.poisson!r}."
-            ) from None
-        if n < 2:
-            raise MetriplexError(
-                f"--poisson canonical:{K} needs at least one position and one momentum (n >= 2 "
-                f"variables), but the data have n={n}. Use --poisson zero (no reversible part) "
-                "or give data with more variables."
-            )
-        if K < 1:
-            raise MetriplexError(
-                f"--poisson canonical:K needs K >= 1 position/momentum pairs; got K={K}. Use "
-                f"canonical:K with 1 <= K <= {n // 2} for these n={n} variables."
-            )
-        if 2 * K > n:
-            raise MetriplexError(
-                f"--poisson canonical:{K} needs 2K <= n (K positions then K momenta), but the data "
-                f"have n={n} variables. Use canonical:K with 1 <= K <= {n // 2}."
-            )
-    if head == "casimir3" and n != 3:
-        raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
-    if _choice(config.friction, tuple(FRICTION_CHOICES), "--friction") == "file":
-        _known_friction(config, n)
+    for flag, value in (("--energy", config.energy), ("--entropy", config.entropy),
+                        ("--poisson", config.poisson), ("--friction", config.friction)):
+        spelling = _spelling(value, flag)
+        if spelling.given is not None:
+            spelling.given(option(value).argument, n)  # its checks (a file: its matrix)
+        elif spelling.check is not None:
+            spelling.check(n)
     if config.constant not in ("auto", "none"):
         _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
@@ -337,37 +291,34 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
     return blocks
 
 
-LEARNED_POISSON = ("neural", "casimir3", "lie-poisson")
+def _spelling(value: str, flag: str) -> Spelling:
+    """The :class:`~metriplex.app._spellings.Spelling` of the structure option ``flag``'s
+    ``value`` (refused, with the choices, where it has none)."""
+    return SPELLINGS[flag][_choice(value, tuple(SPELLINGS[flag]), flag)]
+
+
+#: The spellings of --poisson that learn L.
+LEARNED_POISSON = tuple(k for k, v in SPELLINGS["--poisson"].items() if v.learned)
+
+
+def _given(value: str, flag: str, n: int):
+    spelling = _spelling(value, flag)
+    return None if spelling.given is None else spelling.given(option(value).argument, n)
 
 
 def _known_poisson(config: RunConfig, n: int):
     """The given Poisson bivector, or ``None`` when it is learned."""
-    if config.poisson in LEARNED_POISSON:
-        return None
-    if config.poisson == "zero":
-        return ZeroPoisson(n)
-    kind, argument = option(config.poisson)
-    if kind == "file":
-        return ConstantPoisson(read_matrix(argument, "L", n))
-    return CanonicalPoisson(n, int(argument))
+    return _given(config.poisson, "--poisson", n)
 
 
 def _known_friction(config: RunConfig, n: int):
     """The given friction matrix, or ``None`` when it is learned."""
-    if config.friction == "neural":
-        return None
-    if config.friction == "zero":
-        return ZeroFriction(n)
-    return ConstantFriction(read_matrix(option(config.friction).argument, "M", n))
+    return _given(config.friction, "--friction", n)
 
 
 def _known_entropy(config: RunConfig, n: int):
     """The given entropy, or ``None`` when it is learned."""
-    if config.entropy == "neural":
-        return None
-    if config.entropy == "zero":
-        return ZeroPotential()
-    return SumOf(_indices(option(config.entropy).argument, n, "--entropy"))
+    return _given(config.entropy, "--entropy", n)
 
 
 def preset(name: str, **overrides: Any) -> RunConfig:

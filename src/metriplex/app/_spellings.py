@@ -1,0 +1,156 @@
+"""What ``--energy``, ``--entropy``, ``--poisson`` and ``--friction`` may say, and the block
+each spelling makes: one :class:`Spelling` per value, in one table per option.
+
+The command line's help lists the tables' help texts, :func:`metriplex.app.config.validate`
+accepts their keys and checks their arguments, and :func:`metriplex.app._build.build_model`
+makes the blocks from them. Offering a new block on the command line is one line in a table
+(with the function that makes it, if it needs more than its constructor).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Callable, NamedTuple
+
+import jax
+
+from .._errors import MetriplexError
+from ..io import read_matrix
+from ..structure import _registry
+from ..structure.confinement import Confinement
+from ..structure.constant import ConstantFriction, ConstantPoisson
+from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
+from ..structure.lie_poisson import LiePoisson
+from ..structure.poisson import CanonicalPoisson, ZeroPoisson
+from ..structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
+from ..structure.scaling import Scaling
+
+
+class Learn(NamedTuple):
+    """What a learned block is made from: ``n`` variables, the network's ``net`` settings
+    (width, depth, activation), the training states ``x``, the block's own scales
+    (``output_scale`` of a potential, ``scaling`` of L or M), whether its degeneracy is
+    ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, and its
+    PRNG ``key``."""
+
+    n: int
+    net: dict[str, Any]
+    x: Any
+    key: jax.Array
+    output_scale: float = 1.0
+    scaling: Scaling | None = None
+    exact: bool = False
+    features: FeatureMap | None = None
+    quadratic: bool = False
+    confinement: Confinement | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class Spelling:
+    """One value of a structure option. ``help``: what ``--help`` lists. A block the user
+    gives has ``given(argument, n)``, which checks the text after the colon against data with
+    ``n`` variables and makes the block; a learned one has ``learned(Learn)`` and, where it
+    fits only some data, ``check(n)``."""
+
+    help: str
+    given: Callable[[str, int], Any] | None = None
+    learned: Callable[[Learn], Any] | None = None
+    check: Callable[[int], None] | None = None
+
+
+def indices(text: str, n: int, option: str) -> tuple[int, ...]:
+    """The comma-separated variable indices ``text`` of ``option``, each in ``[0, n)``."""
+    try:
+        idx = tuple(int(v) for v in text.split(",") if v.strip() != "")
+    except ValueError:
+        raise MetriplexError(
+            f"{option} expects comma-separated integer indices (e.g. 8,9); got {text!r}."
+        ) from None
+    bad = [i for i in idx if not 0 <= i < n]
+    if not idx or bad:
+        raise MetriplexError(
+            f"{option} indices must lie in [0, {n - 1}] for data with {n} variables; got "
+            f"{list(idx)}. Count state columns from 0 (after `trajectory` and `t`)."
+        )
+    return idx
+
+
+def _canonical(argument: str, n: int) -> CanonicalPoisson:
+    try:
+        K = int(argument)
+    except ValueError:
+        raise MetriplexError(
+            f"--poisson canonical:K needs an integer K (the number of position/momentum "
+            f"pairs); got 'canonical:{argument}'."
+        ) from None
+    if n < 2:
+        raise MetriplexError(
+            f"--poisson canonical:{K} needs at least one position and one momentum (n >= 2 "
+            f"variables), but the data have n={n}. Use --poisson zero (no reversible part) "
+            "or give data with more variables."
+        )
+    if K < 1:
+        raise MetriplexError(
+            f"--poisson canonical:K needs K >= 1 position/momentum pairs; got K={K}. Use "
+            f"canonical:K with 1 <= K <= {n // 2} for these n={n} variables."
+        )
+    if 2 * K > n:
+        raise MetriplexError(
+            f"--poisson canonical:{K} needs 2K <= n (K positions then K momenta), but the data "
+            f"have n={n} variables. Use canonical:K with 1 <= K <= {n // 2}."
+        )
+    return CanonicalPoisson(n, K)
+
+
+def _three(n: int) -> None:
+    if n != 3:
+        raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
+
+
+def _potential(b: Learn) -> MLPPotential:
+    return MLPPotential(b.n, features=b.features, data=b.x, output_scale=b.output_scale,
+                        quadratic=b.quadratic, confinement=b.confinement, key=b.key, **b.net)
+
+
+def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
+    def make(b: Learn) -> Any:
+        spec = {"kind": exact_kind if b.exact else kind, **b.net,
+                "scaling": b.scaling.to_json()}
+        return _registry.from_spec("poisson", spec, b.n, key=b.key)
+
+    return make
+
+
+def _friction(b: Learn) -> CholeskyFriction | ProjectedCholeskyFriction:
+    cls = ProjectedCholeskyFriction if b.exact else CholeskyFriction
+    return cls(b.n, **b.net, scaling=b.scaling, features=b.features, data=b.x, key=b.key)
+
+
+ENERGY = {"neural": Spelling("neural (default)", learned=_potential)}
+ENTROPY = {
+    "neural": Spelling("neural (default)", learned=_potential),
+    "sum": Spelling("sum:I,J,... (S = sum of those components, counted from 0)",
+                    given=lambda a, n: SumOf(indices(a, n, "--entropy sum:I,J,..."))),
+    "zero": Spelling("zero", given=lambda a, n: ZeroPotential()),
+}
+POISSON = {
+    "neural": Spelling("neural (default)",
+                       learned=_network_poisson("neural", "projected-neural")),
+    "canonical": Spelling("canonical:K (first K positions, next K momenta)", given=_canonical),
+    "zero": Spelling("zero", given=lambda a, n: ZeroPoisson(n)),
+    "casimir3": Spelling("casimir3 (n = 3, Jacobi exact)",
+                         learned=_network_poisson("casimir3", "casimir3"), check=_three),
+    "lie-poisson": Spelling("lie-poisson (learned, linear in the state)",
+                            learned=lambda b: LiePoisson(b.n, scaling=b.scaling, key=b.key)),
+    "file": Spelling("file:PATH (a constant L from .npy, .npz or .mat)",
+                     given=lambda a, n: ConstantPoisson(read_matrix(a, "L", n))),
+}
+FRICTION = {
+    "neural": Spelling("neural (default)", learned=_friction),
+    "zero": Spelling("zero", given=lambda a, n: ZeroFriction(n)),
+    "file": Spelling("file:PATH (a constant M from .npy, .npz or .mat)",
+                     given=lambda a, n: ConstantFriction(read_matrix(a, "M", n))),
+}
+#: The tables by option.
+SPELLINGS = {"--energy": ENERGY, "--entropy": ENTROPY, "--poisson": POISSON,
+             "--friction": FRICTION}
