@@ -50,7 +50,9 @@ import os
 import sys
 
 # Parsed before JAX or metriplex are imported: the code snapshot goes first on sys.path.
-CONFIG_NAMES = ("fully-learned", "fully-learned+jacobi", "pendulum-energetic")
+CONFIG_NAMES = ("fully-learned", "fully-learned+jacobi", "pendulum-energetic",
+                "fully-learned+runs", "pendulum-energetic+runs")
+DEFAULT_CONFIGS = CONFIG_NAMES[:3]  # the issue's rows; "+runs": the option --consecutive 8
 
 
 def _parse(argv):
@@ -58,7 +60,8 @@ def _parse(argv):
     ap.add_argument("--quick", action="store_true",
                     help="tiny smoke test: fully-learned, batch 256, 2 vs 7 steps, tiny data")
     ap.add_argument("--configs", default=None,
-                    help=f"comma list of configurations (default all: {','.join(CONFIG_NAMES)})")
+                    help=f"comma list of configurations from {','.join(CONFIG_NAMES)} (default "
+                         f"{','.join(DEFAULT_CONFIGS)})")
     ap.add_argument("--batches", default=None, help="comma list of batch sizes "
                     "(default 256,1024,8192)")
     ap.add_argument("--short", type=int, default=None, help="steps of the short run (default 20)")
@@ -84,7 +87,7 @@ def _parse(argv):
                          "temporary folder, removed at the end)")
     args = ap.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(",")] if args.configs else (
-        ["fully-learned"] if args.quick else list(CONFIG_NAMES))
+        ["fully-learned"] if args.quick else list(DEFAULT_CONFIGS))
     bad = [c for c in args.configs if c not in CONFIG_NAMES]
     if bad:
         ap.error(f"unknown configuration(s) {bad}; choose from {', '.join(CONFIG_NAMES)}")
@@ -166,13 +169,15 @@ from metriplex.cli import build_parser  # noqa: E402
 from metriplex.app._build import build_loss, build_model, units_for  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
 from metriplex.io import read, write  # noqa: E402
-from metriplex.losses import Batch  # noqa: E402
+from metriplex.losses import Batch, NegativeTemperature  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex._pairs import PairRows, PairStore  # noqa: E402
 from metriplex._train import adjustable_optimizer, make_chunk  # noqa: E402
 from metriplex.structure.poisson import CanonicalPoisson, SkewMLPPoisson  # noqa: E402
 from metriplex.structure.potential import MLPPotential, SumOf  # noqa: E402
-from metriplex.structure.friction import CholeskyFriction  # noqa: E402
+from metriplex.structure.friction import (  # noqa: E402
+    CholeskyFriction, ProjectedCholeskyFriction)
+from metriplex.structure._projection import default_eps  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 
 # name -> (options of `metriplex train`, whether the exact Jacobi penalty is on, description)
@@ -183,6 +188,13 @@ CONFIGS = {
     "pendulum-energetic": (["--poisson", "canonical:4", "--entropy", "sum:8,9"], False,
                            "n = 10, L canonical:4, S = s1 + s2 (indices 8, 9), E and M "
                            "learned; L is given, so no Jacobi penalty applies"),
+    # The option that shares states between consecutive pairs (not a default: it costs
+    # accuracy, docs/zoo.md); against the same plain step of independent pairs.
+    "fully-learned+runs": (["--consecutive", "8"], False,
+                           "fully-learned with --consecutive 8 (batches as runs of 8 pairs)"),
+    "pendulum-energetic+runs": (["--poisson", "canonical:4", "--entropy", "sum:8,9",
+                                 "--consecutive", "8"], False,
+                                "pendulum-energetic with --consecutive 8"),
 }
 TARGET = {False: 0.5, True: 0.45}  # issue #16: metriplex / plain
 SYSTEM, DT = "pendulum-energetic", 0.1
@@ -214,9 +226,13 @@ def make_data(folder: Path, quick: bool) -> Path:
 
 
 def cli_options(data: Path, name: str, batch: int, steps: int, out: Path) -> list[str]:
+    # --no-reversible-first: by default these configurations first train L grad E alone, and
+    # --steps caps each stage, so a run of N steps would time N steps of both stages. Without
+    # it the one stage is the configuration's whole training (M grad E = 0 as a penalty, as
+    # before the first stage was a default), and the plain step is built from that model.
     return ["train", str(data), "--out", str(out), "--quiet", "--steps", str(steps),
             "--eval-every", str(steps), "--batch-size", str(batch),
-            "--validation", str(VALID_FRACTION), *CONFIGS[name][0]]
+            "--validation", str(VALID_FRACTION), "--no-reversible-first", *CONFIGS[name][0]]
 
 
 # ------------------------------------------------------------------------------------------
@@ -252,16 +268,20 @@ def plain_loss_fn(c: dict):
         A = jnp.zeros((n, n), x.dtype).at[iu].set(a)  # strict upper triangle, by scatter
         return c["L_congruence"] * (A - A.T)
 
-    def friction(p, x):
+    def friction(p, x, gE):
         b = mlp(p["M"], (x - c["M_shift"]) / c["M_scale"])
         B = jnp.zeros((n, n), x.dtype).at[il].set(b) * c["M_rows"][:, None]  # by scatter
+        if c["M_projected"]:  # M grad E = 0: B projected against grad E (standardised)
+            d = c["M_scale"]
+            r = jax.lax.rsqrt(jnp.sum((d * gE) ** 2) + c["M_eps2"])
+            B = B - jnp.outer(d * d * gE * r, (gE * r) @ B)
         return B @ B.T
 
     def per_state(p, x):
         gE = jax.grad(energy, argnums=1)(p, x)
         gS = jax.grad(entropy, argnums=1)(p, x)
-        L, M = poisson(p, x), friction(p, x)
-        return L @ gE + M @ gS, L @ gS, M @ gE
+        L, M = poisson(p, x), friction(p, x, gE)
+        return L @ gE + M @ gS, L @ gS, M @ gE, gE
 
     def jacobi(p, x):
         L = poisson(p, x)
@@ -275,11 +295,18 @@ def plain_loss_fn(c: dict):
     def msq(v):
         return jnp.mean(jnp.sum((v / rate[None, :]) ** 2, axis=-1))
 
+    def cold(gE):  # the hinge on negative temperatures: relu(-d_i dE/ds_i)^2 / |D grad E|^2
+        g = gE * c["T_scale"][None, :]
+        hot = jnp.mean(jnp.sum(jax.nn.relu(-g[:, np.asarray(c["T_index"])]) ** 2, axis=-1))
+        return hot / (jnp.mean(jnp.sum(g**2, axis=-1)) + jnp.finfo(g.dtype).tiny)
+
     def loss(p, x0, x1, dt):
-        f0, LgS0, MgE0 = jax.vmap(per_state, in_axes=(None, 0))(p, x0)
-        f1, LgS1, MgE1 = jax.vmap(per_state, in_axes=(None, 0))(p, x1)
+        f0, LgS0, MgE0, gE0 = jax.vmap(per_state, in_axes=(None, 0))(p, x0)
+        f1, LgS1, MgE1, gE1 = jax.vmap(per_state, in_axes=(None, 0))(p, x1)
         r = 2.0 * (x1 - x0) / dt[:, None] - f0 - f1
         total = w["residual"] * 0.25 * msq(r)
+        if "temperature" in w:
+            total = total + w["temperature"] * 0.5 * (cold(gE0) + cold(gE1))
         if "degeneracy_L" in w:
             total = total + w["degeneracy_L"] * 0.5 * (msq(LgS0) + msq(LgS1))
         if "degeneracy_M" in w:
@@ -326,13 +353,22 @@ def plain_setup(model, loss, units):
         assert isinstance(L, CanonicalPoisson)
         c["L_const"] = L.matrix()
     M = model.friction
+    c["M_projected"] = type(M) is ProjectedCholeskyFriction  # the default: M grad E = 0 exact
+    if c["M_projected"]:
+        eps = default_eps(M.eps, dtype)
+        c["M_eps2"] = max(eps * eps, float(jnp.finfo(dtype).tiny))
+        M = M.base
     assert type(M) is CholeskyFriction and M.features is None
     p["M"] = _layers(M.hidden, M.head.weight, M.head.bias)
     d = np.asarray(M.scaling.scale)
     c.update(M_shift=f(M.scaling.shift), M_scale=f(d),
              M_rows=f(np.sqrt(M.scaling.factor) * d))
     c["weights"] = dict(zip(loss.names, loss.weights))
-    unknown = set(c["weights"]) - {"residual", "degeneracy_L", "degeneracy_M", "jacobi"}
+    for term in loss.terms:
+        if isinstance(term, NegativeTemperature):
+            c.update(T_index=tuple(term.indices), T_scale=f(units.rate))
+    unknown = set(c["weights"]) - {"residual", "degeneracy_L", "degeneracy_M", "jacobi",
+                                   "temperature"}
     assert not unknown, unknown
     p = jax.tree_util.tree_map(lambda a: jnp.asarray(a, dtype), p)
     return p, c
@@ -378,11 +414,12 @@ class FitChunk:
     that ``fit`` runs (``make_chunk``: ``length`` steps in one ``lax.scan``), with fit's
     optimiser, on the same pairs, for the same model and loss."""
 
-    def __init__(self, model, loss, pairs, rate, batch: int, lr: float, length: int = 10):
+    def __init__(self, model, loss, pairs, rate, batch: int, lr: float, length: int = 10,
+                 consecutive: int = 1):
         params, static = eqx.partition(model, eqx.is_inexact_array)
         opt = adjustable_optimizer(lr)
         self.length = length
-        self.fn = eqx.filter_jit(make_chunk(loss, opt, static, batch))
+        self.fn = eqx.filter_jit(make_chunk(loss, opt, static, batch, consecutive=consecutive))
         self.full = PairStore.of(PairRows.of(pairs, None, "benchmark"),
                                  np.asarray(rate, np.float64), jnp.float32)
         self.state = (params, opt.init(params), jr.key(2))
@@ -405,8 +442,9 @@ class FitChunk:
 
 
 def setup(name: str, data_path: Path, batch: int):
-    """metriplex's model and loss for this row, as ``metriplex train`` builds them, and the
-    plain reference made from them; checks that the two losses agree."""
+    """metriplex's model and loss for this row, as ``metriplex train`` builds them, the plain
+    reference's weights and constants made from them, the training trajectories and the
+    configuration."""
     args = build_parser().parse_args(cli_options(data_path, name, batch, 1, Path("unused")))
     config = _config_from_args(args)
     data = read(data_path)
@@ -417,8 +455,7 @@ def setup(name: str, data_path: Path, batch: int):
     model = with_dtype(model, jnp.float32)
     loss = build_loss(config, units)
     params, consts = plain_setup(model, loss, units)
-    pairs = train.pairs()
-    return model, loss, params, consts, pairs, config
+    return model, loss, params, consts, train, config
 
 
 def check_same_loss(model, loss, params, consts, pairs, units_rate) -> tuple[float, float]:
@@ -481,11 +518,14 @@ def _cpu_name() -> str:
 def measure_row(name, batch, data_path, args, env, work: Path) -> dict:
     jacobi = CONFIGS[name][1]
     load_at_start = _load()
-    model, loss, params, consts, pairs, config = setup(name, data_path, batch)
+    model, loss, params, consts, train, config = setup(name, data_path, batch)
+    pairs = train.pairs()
     check = check_same_loss(model, loss, params, consts, pairs, consts["rate"])
     bsz = min(batch, len(pairs))
     plain = PlainStep(params, consts, pairs, bsz, config.lr)
-    chunk = FitChunk(model, loss, pairs, consts["rate"], bsz, config.lr)
+    # fit holds trajectories as rows, so that --consecutive can draw runs of them
+    chunk = FitChunk(model, loss, train, consts["rate"], bsz, config.lr,
+                     consecutive=config.consecutive if loss.reads_runs else 1)
     t0 = time.perf_counter()
     plain.run(2)  # compile and warm up
     plain_compile_s = time.perf_counter() - t0

@@ -26,7 +26,8 @@ def _script():
 
 # fully-learned+jacobi holds every learned block of fully-learned plus the Jacobi term.
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["fully-learned+jacobi", "pendulum-energetic"])
+@pytest.mark.parametrize("name", ["fully-learned+jacobi", "pendulum-energetic",
+                                  "pendulum-energetic+runs"])
 def test_plain_loss_is_metriplex_loss(tmp_path, name):
     from metriplex.io import write
     from metriplex.systems import generate
@@ -34,12 +35,17 @@ def test_plain_loss_is_metriplex_loss(tmp_path, name):
     pr = _script()
     path = tmp_path / "pendulum.npz"
     write(path, generate("pendulum-energetic", trajectories=3, steps=30, dt=0.1, seed=0))
-    model, loss, params, consts, pairs, config = pr.setup(name, path, 16)
+    model, loss, params, consts, train, config = pr.setup(name, path, 16)
+    pairs = train.pairs()
     assert ("jacobi" in consts["weights"]) == pr.CONFIGS[name][1]
     ours, plain = pr.check_same_loss(model, loss, params, consts, pairs, consts["rate"])
     assert np.isfinite(ours) and ours > 0
     step = pr.PlainStep(params, consts, pairs, 16, config.lr)
     assert step.run(2) > 0
+    assert config.consecutive == (8 if name.endswith("+runs") else 1)
+    chunk = pr.FitChunk(model, loss, train, consts["rate"], 16, config.lr, length=2,
+                        consecutive=config.consecutive)
+    assert chunk.run(2)[1] == 2
 
 
 @pytest.mark.slow
