@@ -76,8 +76,9 @@ def _fit(data, **kwargs):
         energy=mx.MLPPotential(3, width=8, key=jr.key(0)),
         entropy=mx.SumOf((2,)), poisson=mx.CanonicalPoisson(3, pairs=1),
         friction=mx.CholeskyFriction(3, width=8, key=jr.key(1)))
-    return mx.fit(model, data, steps=60, eval_every=20, stopping=None, rollout_check=None,
-                  progress=False, key=jr.key(2), **kwargs)
+    options = dict(steps=60, eval_every=20, stopping=None, rollout_check=None, progress=False,
+                   key=jr.key(2))
+    return mx.fit(model, data, **{**options, **kwargs})
 
 
 @pytest.mark.slow
@@ -186,3 +187,14 @@ def test_fit_draws_runs_only_where_every_term_reads_them(data):
     assert runs.train["total"][1:] != independent.train["total"][1:]
     with pytest.raises(MetriplexError, match=r"consecutive must be an integer >= 1.*got 0"):
         _fit(data, consecutive=0)
+
+
+def test_fit_progress_in_a_log_is_not_redrawn_at_every_evaluation(data, capsys, monkeypatch):
+    # Written to a pipe or file (stderr under pytest), the bar is redrawn at most every 30 s;
+    # each evaluation's figures must not force a redraw of their own (they did: a frame per
+    # 100 steps in every log).
+    monkeypatch.delenv("TQDM_MININTERVAL", raising=False)
+    capsys.readouterr()
+    _fit(data, progress=True, steps=600, eval_every=50)
+    frames = capsys.readouterr().err.count("\r")
+    assert 1 <= frames <= 4, frames

@@ -190,7 +190,7 @@ class FitLoop:
         postfix = dict(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
         if ev.windows is not None:
             postfix["rollout"] = f"{score:.3g}" + (f" ({failures} failed)" if failures else "")
-        self.bar.set_postfix(**postfix)
+        self.bar.set_postfix(refresh=False, **postfix)  # redrawn with the bar, as often as it is
         return score, failures
 
     def should_stop(self) -> bool:
