@@ -34,6 +34,10 @@ def test_train_summary_counts_failed_rollouts_and_says_when_nothing_was_learned(
     assert "4 of 10 rollouts on validation trajectories FAILED" in line
     assert "error of the 6 completed: 5.000e-02" in line
     assert "NO trained model rolled out the held-out trajectories better than the untrained" in line
+    assert "another --seed" in line and "--no-reversible-first" not in line
+    staged = _train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
+                            Path("run"), first_stage=True)
+    assert "--no-reversible-first: the first stage can stall" in staged
 
 
 def test_train_summary_says_when_the_budget_ended_training_before_convergence():

@@ -101,8 +101,11 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path, *,
         ended += "; the best model is the last one: not converged, allow more --steps"
     if history.best_step == 0 and last > 0:
         ended += ("; NO trained model rolled out the held-out trajectories better than the "
-                  "untrained one (kept): the data do not determine the dynamics away from the "
-                  "training trajectories; give more trajectories or more of the structure")
+                  "untrained one (kept): either the data do not determine the dynamics away "
+                  "from the training trajectories (give more trajectories or more of the "
+                  "structure), or training ended in a poor fit (try another --seed"
+                  + (", or --no-reversible-first: the first stage can stall" if first_stage
+                     else "") + ")")
     k = metrics.get("trajectories", 0)
     failed = metrics.get("rollout_failures", 0)
     err = metrics.get("rollout_error_mean")
