@@ -7,7 +7,7 @@ strings are read in :mod:`metriplex.app.config`; this module turns checked setti
 
 from __future__ import annotations
 
-from typing import Any, TextIO
+from typing import Any, NamedTuple, TextIO
 
 import jax
 import jax.random as jr
@@ -53,25 +53,41 @@ from ..structure.potential import FeatureMap
 from ._spellings import Learn
 from ..train import Average, Plateau
 
-def units_for(config: RunConfig, data: Trajectories) -> Units:
-    """The data's :class:`~metriplex.Units` for the blocks that ``config`` gives."""
-    n = data.n
-    return Units.from_data(data, poisson=_known_poisson(config, n),
-                           entropy=_known_entropy(config, n),
-                           friction=_known_friction(config, n))
+class Given(NamedTuple):
+    """The blocks that ``config`` gives (``None`` for each one learned), made once: a
+    ``file:`` L or M is read here, not again by every reader."""
+
+    poisson: Any
+    entropy: Any
+    friction: Any
+
+    @classmethod
+    def of(cls, config: RunConfig, n: int) -> "Given":
+        return cls(_known_poisson(config, n), _known_entropy(config, n),
+                   _known_friction(config, n))
+
+
+def units_for(config: RunConfig, data: Trajectories, given: Given | None = None) -> Units:
+    """The data's :class:`~metriplex.Units` for the blocks that ``config`` gives (``given``,
+    default :meth:`Given.of`)."""
+    given = Given.of(config, data.n) if given is None else given
+    return Units.from_data(data, poisson=given.poisson, entropy=given.entropy,
+                           friction=given.friction)
 
 
 def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
                 units: Units | None = None,
-                constant: tuple[int, ...] | None = None) -> GenericModel:
+                constant: tuple[int, ...] | None = None,
+                given: Given | None = None) -> GenericModel:
     """The untrained model that ``config`` describes, in the natural ``units`` of ``data``
     (default :func:`units_for`): networks see standardised states, and their outputs are scaled
     so that an untrained network gives rates of the data's order, whatever the units. The
     learned L and M hold the variables ``constant`` constant (default
-    :func:`constant_variables`)."""
+    :func:`constant_variables`). ``given``: the given blocks, if already made."""
     n = data.n
     validate(config, n)
-    units = units_for(config, data) if units is None else units
+    given = Given.of(config, n) if given is None else given
+    units = units_for(config, data, given) if units is None else units
     x = data.x
     kE, kS, kL, kM = jr.split(key, 4)
     net = dict(width=config.width, depth=config.depth, activation=config.activation)
@@ -83,8 +99,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
         n, net, x, kE, output_scale=units.energy, features=feats["energy"],
         quadratic=bool(config.quadratic),
         confinement=Confinement.around(x) if confine_on(config) else None))
-    poisson = _known_poisson(config, n)
-    entropy = _known_entropy(config, n)
+    poisson, entropy, friction = given
     if entropy is None:
         free = casimir_variables(config, poisson)
         if free is not None:  # S a Casimir of the given L by construction
@@ -95,7 +110,6 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     if poisson is None:
         poisson = _spelling(config.poisson, "--poisson").learned(Learn(
             n, net, x, kL, scaling=units.poisson_scaling(), exact=exact_L))
-    friction = _known_friction(config, n)
     if friction is None:
         friction = _spelling(config.friction, "--friction").learned(Learn(
             n, net, x, kM, scaling=units.friction_scaling(), exact=exact_M,

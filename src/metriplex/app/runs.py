@@ -25,12 +25,12 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
-from ._build import (build_loss, build_model, casimir_variables, constant_variables,
+from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      fit_settings, stopping_for, units_for)
 from ._report import report_figures
 from ._stages import reversible_first
-from .config import (RunConfig, _known_poisson, confine_on, exact_blocks,
-                     reversible_first_on, scheme_from_name, temperature_weight, validate)
+from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on, scheme_from_name,
+                     temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -244,14 +244,15 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     if resume:
         _check_resume(run_config(out), data_info, train, valid)
     model_key, fit_key = jr.split(jr.key(config.seed))
-    units = units_for(config, train)
+    given = Given.of(config, train.n)  # a file: L or M read once
+    units = units_for(config, train, given)
     constant = constant_variables(config, train, note=sys.stderr)
-    free = casimir_variables(config, _known_poisson(config, train.n))
+    free = casimir_variables(config, given.poisson)
     if free is not None and not resume:
         print(f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
               "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
               "(--degeneracy soft learns it of every variable)", file=sys.stderr)
-    model = build_model(config, train, key=model_key, units=units, constant=constant)
+    model = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
     if reversible_first_on(config) and not resume:
@@ -264,8 +265,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     stopping = stopping_for(config)
     header = {
         "config": config.to_json(),
-        # What the options left at their default (None, "auto") decided for these data, so
-        # the folder tells which stages, walls and exact blocks the run had.
+        # What options left at None/"auto" decided: the run's stages, walls and exact blocks.
         "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
