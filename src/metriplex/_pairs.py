@@ -156,7 +156,7 @@ class PairStore(NamedTuple):
         rows = jnp.minimum(start[:, None] + jnp.arange(pairs + 1, dtype=start.dtype)[None, :],
                            last)
         step = self.step_from[rows[:, :-1]].reshape(-1)
-        valid = (step > 0) & (rows[:, 1:] > rows[:, :-1]).reshape(-1)
+        valid = step > 0  # no pair starts at a trajectory's last row, nor at the clipped last
         local = (jnp.arange(R, dtype=start.dtype)[:, None] * (pairs + 1)
                  + jnp.arange(pairs, dtype=start.dtype)[None, :]).reshape(-1)
         states = self.x[rows.reshape(-1)]

@@ -151,7 +151,8 @@ def with_learning_rate(opt_state: optax.OptState, learning_rate: float) -> optax
 
 def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any, batch_size: int,
                shard: Callable[[Batch], Batch] | None = None, noise: jax.Array | None = None,
-               consecutive: int = 1) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
+               consecutive: int = 1,
+               ) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
     """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
     runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
     ``full_train`` (a :class:`~metriplex._pairs.PairStore` of all training pairs), and returns

@@ -154,7 +154,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "both states of every training pair, as a fraction of each variable's "
                    f"standard deviation (default {d.input_noise}; 0 for none)")
     w.add_argument("--consecutive", type=int, metavar="K", help="draw each training batch "
-                   "as runs of K consecutive pairs, so each state is evaluated once, not twice "
+                   "as runs of K consecutive pairs, so each state is evaluated once, not twice; "
+                   "not with --input-noise, --data-parallel, --window-steps or "
+                   "--degeneracy-at midpoints, which keep independent pairs "
                    f"(default {d.consecutive}; 1 for independent pairs)")
     w.add_argument("--window-steps", type=int, metavar="K", help="also train on rollouts "
                    "of K steps from the first states of 32 training pairs per batch, against "
