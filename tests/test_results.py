@@ -37,7 +37,11 @@ def test_train_summary_counts_failed_rollouts_and_says_when_nothing_was_learned(
     assert "another --seed" in line and "--no-reversible-first" not in line
     staged = _train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
                             Path("run"), first_stage=True)
-    assert "--no-reversible-first: the first stage can stall" in staged
+    # After a first stage, step 0 of the main stage is the first stage's trained model: the
+    # line does not call it untrained, and names the stall as the cause to rule out.
+    assert "NO trained" not in staged and "untrained one" not in staged
+    assert "the main stage's start (the first stage's model" in staged
+    assert "another --seed, or --no-reversible-first" in staged
 
 
 def test_train_summary_says_when_the_budget_ended_training_before_convergence():
@@ -244,3 +248,10 @@ def test_a_learned_entropy_that_the_flow_decreases_is_warned_about():
     (line,) = [w for w in structure_warnings(r) if "entropy decreases" in w]
     assert f"{r['entropy_production_negative_fraction']:.0%} of the rollout states" in line
     assert "--degeneracy exact" in line
+    # No friction: S plays no part in this model, and the warning says so (a conservative
+    # system's learned S is not determined by any data).
+    assert r["reversible_share"] == 1.0
+    assert "The friction drives none of the motion, so this S plays almost no part" in line
+    busy = structure_warnings({**r, "reversible_share": 0.9})
+    (line,) = [w for w in busy if "entropy decreases" in w]
+    assert "plays almost no part" not in line

@@ -56,6 +56,23 @@ REVERSIBLE_SHARE = _LIMITS.reversible_share
 NEGATIVE_PRODUCTION = _LIMITS.entropy_production
 
 
+#: Above this share of the motion driven by L grad E, the learned friction is called idle (the
+#: model is reversible) in the warning on a decreasing entropy.
+IDLE_FRICTION_SHARE = 0.999
+
+
+def _idle_friction(share: float | None) -> str:
+    """What the decreasing-entropy warning adds where the learned friction moves almost
+    nothing: S then plays almost no part in the model (as for a conservative system, whose
+    learned S no data can determine)."""
+    if share is None or share <= IDLE_FRICTION_SHARE:
+        return ""
+    drives = "none" if share >= 1.0 else f"only {1 - share:.1e}"
+    return (f" The friction drives {drives} of the motion, so this S plays almost no part in "
+            "the model: if the system conserves its energy, this warning does not concern its "
+            "dynamics; if it dissipates, the friction was not learned.")
+
+
 def structure_warnings(metrics: dict) -> list[str]:
     """Every warning on what the learned structure means: :func:`temperature_warnings`, a
     learned energy that drives almost none of the motion (friction carries it), and a learned
@@ -71,7 +88,8 @@ def structure_warnings(metrics: dict) -> list[str]:
                    "default and --degeneracy exact makes it exact (it can cost accuracy, see "
                    "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
                    "default S is then learned of the variables L leaves free, where L has "
-                   "such coordinates; not with --degeneracy soft).")
+                   "such coordinates; not with --degeneracy soft)."
+                   + _idle_friction(metrics.get("reversible_share")))
     share = metrics.get("reversible_share")
     if share is not None and share < REVERSIBLE_SHARE:
         out.append(f"warning: the learned energy drives {share:.1e} of the motion (L grad E); "

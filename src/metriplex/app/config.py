@@ -110,6 +110,7 @@ class RunConfig:
     average_steps: int = 500
     w_temperature: float | None = None
     reversible_first: bool | None = None
+    starts: int | None = None
     confine: bool | None = None
     constant: str = "auto"
 
@@ -229,6 +230,10 @@ def validate(config: RunConfig, n: int) -> None:
                                             "the parameters spans")):
         expect_integer(getattr(config, name), least=0, what=f"--{name.replace('_', '-')}",
                        fix=f"It counts {meaning}; 0 turns it off.")
+    if config.starts is not None:
+        expect_integer(config.starts, least=1, what="--starts",
+                       fix="It counts the initialisations tried before the best is trained; "
+                           "1 trains the first one only.")
     if not 0 <= config.input_noise < 1:
         raise MetriplexError(
             f"--input-noise must be in [0, 1) (a fraction of each variable's standard "

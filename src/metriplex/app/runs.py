@@ -28,7 +28,7 @@ from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      fit_settings, stopping_for, units_for)
 from ._report import report_figures
-from ._stages import reversible_first
+from ._stages import before_main, starts_for
 from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on, scheme_from_name,
                      temperature_weight, validate)
 from ..data import Trajectories
@@ -76,7 +76,7 @@ RESUME_MAY_CHANGE = ("max_minutes",)
 #: run saved with the decision spelled out (or made before the option had a default of None)
 #: resumes with the option left out.
 _DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
-            "w_temperature": temperature_weight}
+            "w_temperature": temperature_weight, "starts": starts_for}
 
 
 def _resume_differences(saved: RunConfig, given: RunConfig) -> str:
@@ -255,10 +255,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
-    if reversible_first_on(config) and not resume:
-        model = reversible_first(model, config, train, valid, units=units, constant=constant,
-                                 dtype=dtype, key=jr.fold_in(fit_key, 1), progress=progress,
-                                 max_seconds=budget)
+    if not resume:  # the first stage or the best of --starts initialisations
+        model = before_main(model, config, train, valid, units=units, constant=constant,
+                            given=given, dtype=dtype, model_key=model_key,
+                            key=jr.fold_in(fit_key, 1), progress=progress, max_seconds=budget)
     model = with_dtype(model, dtype)
     loss = build_loss(config, units)
     exact_L, exact_M = exact_blocks(config)

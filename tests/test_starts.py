@@ -1,0 +1,82 @@
+"""``--starts``: several initialisations trained briefly, the best one trained on."""
+
+import dataclasses
+import json
+
+import jax.random as jr
+import pytest
+
+from metriplex import MetriplexError
+from metriplex._train import History
+from metriplex.app import _stages
+from metriplex.app.config import RunConfig, validate
+from metriplex.app.runs import train_run
+from metriplex.systems import generate
+
+
+@pytest.mark.parametrize("changes,starts", [
+    (dict(), _stages.STARTS),  # L learned
+    (dict(poisson="lie-poisson"), _stages.STARTS),
+    (dict(poisson="canonical:1", entropy="sum:2"), 1),  # L given: no gauge to fall into
+    (dict(poisson="zero"), 1),
+    (dict(starts=5, poisson="canonical:1"), 5),  # asked for
+    (dict(starts=1), 1),
+])
+def test_starts_are_tried_where_L_is_learned(changes, starts):
+    assert _stages.starts_for(dataclasses.replace(RunConfig(), **changes)) == starts
+
+
+@pytest.mark.parametrize("value", [0, -2, 1.5])
+def test_a_start_count_below_one_is_refused(value):
+    with pytest.raises(MetriplexError, match="--starts"):
+        validate(RunConfig(starts=value), 3)
+
+
+def test_best_start_goes_on_from_the_start_of_lowest_validation_loss(monkeypatch, capsys):
+    scores = {0: 0.3, 1: 0.01, 2: float("nan"), 3: 0.2}
+    built, calls = [], []
+
+    def build(key):
+        built.append(len(built))
+        return f"start {built[-1]}"
+
+    def fake_fit(start, train, **kwargs):
+        calls.append(kwargs)
+        i = int(start.split()[1])
+        return f"fitted {i}", History(best_valid=scores[i], stopped="step budget reached")
+
+    monkeypatch.setattr(_stages, "fit", fake_fit)
+    best = _stages.best_start(build, jr.key(0), starts=4, train=None, valid=None,
+                              fit_args=dict(steps=50_000, loss="L"), label="starts")
+    assert best == "fitted 1"  # a NaN score is never the best
+    assert len(built) == 4 and len(calls) == 4
+    # Each start trains exactly START_STEPS steps, judged by its validation loss alone.
+    for kw in calls:
+        assert kw["steps"] == _stages.START_STEPS and kw["stopping"] is None
+        assert kw["rollout_check"] is None and kw["loss"] == "L"
+    assert "the best of 4 initialisations" in capsys.readouterr().err
+    # A short stage gives each start a tenth of its steps.
+    calls.clear()
+    built.clear()
+    _stages.best_start(build, jr.key(0), starts=2, train=None, valid=None,
+                       fit_args=dict(steps=3000), label="starts")
+    assert [kw["steps"] for kw in calls] == [300, 300]
+    assert "after 300 steps each" in capsys.readouterr().err
+    # One start: the first initialisation, untrained, and no line.
+    built.clear()
+    calls.clear()
+    assert _stages.best_start(build, jr.key(0), starts=1, train=None, valid=None,
+                              fit_args={}, label="starts") == "start 0"
+    assert not calls and not capsys.readouterr().err
+
+
+def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys):
+    data = generate("rigid-body", trajectories=4, steps=30, seed=0)
+    config = RunConfig(entropy="zero", friction="zero", steps=200, eval_every=50,
+                       average_steps=0, validation=0.25, starts=2)
+    train_run(data, config, tmp_path / "run", progress=False)
+    # Each start trains a tenth of --steps at most (20 here, 1000 by default).
+    assert "starts: the best of 2 initialisations after 20 steps each" in \
+        capsys.readouterr().err
+    header = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert header["decided"]["starts"] == 2
