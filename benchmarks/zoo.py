@@ -41,7 +41,7 @@ jax.config.update("jax_enable_x64", True)  # ground truth in float64; training s
 
 import numpy as np  # noqa: E402
 
-from metriplex.config import RunConfig  # noqa: E402
+from metriplex.config import RunConfig, reversible_first_on  # noqa: E402
 from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
@@ -137,6 +137,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
+        "first_stage": reversible_first_on(config),
         "generalisation_gap": history.generalisation_gap(),
         "stopped": history.stopped,
         "converged": history.converged,
@@ -146,9 +147,11 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
 
 
 def _kept(row: dict) -> str:
-    """The step of the kept model; 0 is the untrained one (training never beat it)."""
+    """The main stage's step of the kept model; 0 is its start: the untrained model, or the
+    first stage's after one (training never beat it)."""
     step = row.get("kept_step")
-    return "-" if step is None else ("0 (untrained)" if step == 0 else str(step))
+    start = "0 (first stage's)" if row.get("first_stage") else "0 (untrained)"
+    return "-" if step is None else (start if step == 0 else str(step))
 
 
 def _share(row: dict) -> str:

@@ -33,36 +33,41 @@ def test_a_start_count_below_one_is_refused(value):
 
 
 def test_best_start_goes_on_from_the_start_of_lowest_validation_loss(monkeypatch, capsys):
-    scores = {0: 0.3, 1: 0.01, 2: float("nan"), 3: 0.2}
     built, calls = [], []
 
     def build(key):
         built.append(len(built))
         return f"start {built[-1]}"
 
-    def fake_fit(start, train, **kwargs):
-        calls.append(kwargs)
-        i = int(start.split()[1])
-        return f"fitted {i}", History(best_valid=scores[i], stopped="step budget reached")
+    def fake_fit(scores):
+        def fit(start, train, **kwargs):
+            calls.append(kwargs)
+            i = int(start.split()[1])
+            return f"fitted {i}", History(best_valid=scores[i], stopped="step budget reached")
+        return fit
 
-    monkeypatch.setattr(_stages, "fit", fake_fit)
+    monkeypatch.setattr(_stages, "fit", fake_fit([float("nan"), 0.01, 0.3, 0.2]))
     best = _stages.best_start(build, jr.key(0), starts=4, train=None, valid=None,
                               fit_args=dict(steps=50_000, loss="L"), label="starts")
-    assert best == "fitted 1"  # a NaN score is never the best
+    # The chosen initialisation is returned untrained (a NaN score is never the best), so
+    # the stage trains it from its start.
+    assert best == "start 1"
     assert len(built) == 4 and len(calls) == 4
     # Each start trains exactly START_STEPS steps, judged by its validation loss alone.
     for kw in calls:
         assert kw["steps"] == _stages.START_STEPS and kw["stopping"] is None
         assert kw["rollout_check"] is None and kw["loss"] == "L"
-    assert "the best of 4 initialisations" in capsys.readouterr().err
-    # A short stage gives each start a tenth of its steps.
-    calls.clear()
+    assert "starts: initialisation 2 of 4, trained from its start" in capsys.readouterr().err
+    # Where the first is best, the stage gets exactly the model one start gives.
     built.clear()
-    _stages.best_start(build, jr.key(0), starts=2, train=None, valid=None,
-                       fit_args=dict(steps=3000), label="starts")
+    calls.clear()
+    monkeypatch.setattr(_stages, "fit", fake_fit([0.1, 0.2]))
+    assert _stages.best_start(build, jr.key(0), starts=2, train=None, valid=None,
+                              fit_args=dict(steps=3000), label="starts") == "start 0"
+    # A short stage gives each start a tenth of its steps.
     assert [kw["steps"] for kw in calls] == [300, 300]
-    assert "after 300 steps each" in capsys.readouterr().err
-    # One start: the first initialisation, untrained, and no line.
+    assert "initialisation 1 of 2" in capsys.readouterr().err
+    # One start: the first initialisation, and no training and no line.
     built.clear()
     calls.clear()
     assert _stages.best_start(build, jr.key(0), starts=1, train=None, valid=None,
@@ -76,7 +81,7 @@ def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys):
                        average_steps=0, validation=0.25, starts=2)
     train_run(data, config, tmp_path / "run", progress=False)
     # Each start trains a tenth of --steps at most (20 here, 1000 by default).
-    assert "starts: the best of 2 initialisations after 20 steps each" in \
-        capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "starts: initialisation" in err and "after 20 steps each" in err
     header = json.loads((tmp_path / "run" / "config.json").read_text())
     assert header["decided"]["starts"] == 2

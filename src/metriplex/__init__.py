@@ -65,6 +65,7 @@ from .structure import KnownFriction as KnownFriction
 from .structure import KnownPoisson as KnownPoisson
 from .structure import MLPPotential as MLPPotential
 from .structure import ProjectedCholeskyFriction as ProjectedCholeskyFriction
+from .structure import PlanarPoisson as PlanarPoisson
 from .structure import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .structure import Scaling as Scaling
 from .structure import SkewMLPPoisson as SkewMLPPoisson

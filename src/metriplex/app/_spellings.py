@@ -114,8 +114,11 @@ def _potential(b: Learn) -> MLPPotential:
 
 def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
     def make(b: Learn) -> Any:
-        spec = {"kind": exact_kind if b.exact else kind, **b.net,
-                "scaling": b.scaling.to_json()}
+        chosen = exact_kind if b.exact else kind
+        if chosen == "neural" and b.n == 2:
+            # a(x) J of one sign: E, always learned on the command line, takes the sign.
+            chosen = "planar"
+        spec = {"kind": chosen, **b.net, "scaling": b.scaling.to_json()}
         return _registry.from_spec("poisson", spec, b.n, key=b.key)
 
     return make
@@ -134,7 +137,7 @@ ENTROPY = {
     "zero": Spelling("zero", given=lambda a, n: ZeroPotential()),
 }
 POISSON = {
-    "neural": Spelling("neural (default)",
+    "neural": Spelling("neural (default; of one sign, a(x) J, for two variables)",
                        learned=_network_poisson("neural", "projected-neural")),
     "canonical": Spelling("canonical:K (first K positions, next K momenta)", given=_canonical),
     "zero": Spelling("zero", given=lambda a, n: ZeroPoisson(n)),

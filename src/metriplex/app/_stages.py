@@ -1,5 +1,5 @@
-"""Training stages before the main one: ``--starts`` tries several initialisations and goes on
-from the best, and ``--reversible-first`` trains the reversible part alone, so that the
+"""Training stages before the main one: ``--starts`` tries several initialisations and trains
+the best from its start, and ``--reversible-first`` trains the reversible part alone, so that the
 friction joins an energy that already drives the motion."""
 
 from __future__ import annotations
@@ -17,16 +17,20 @@ from .._model import GenericModel, with_dtype
 from .._units import Units
 from ..data import Trajectories
 from ..train import fit
-from ._build import build_loss, build_model, fit_settings
-from ._build import Given
+from ._build import Given, build_loss, build_model, fit_settings
 from .config import (LEARNED_POISSON, RunConfig, confine_on, reversible_first_on,
                      temperature_weight)
 
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+
 #: Initialisations tried where L is learned (``--starts`` left out), and the steps each trains
-#: before the best is kept. A learned L = a(x) J and E trade a gauge (a/phi'(E), phi(E)): from
-#: about one initialisation in 20 the pair falls into a zero of a across the data and the
-#: residual sits 100x above the others' from step 1 000 on (docs/zoo.md, *Found outside the
-#: zoo*); the best of three makes that about one in 8 000.
+#: before the best is chosen. A learned L and E trade a gauge (for L = a(x) J: a/phi'(E),
+#: phi(E)), and some initialisations fall into a poor minimum early: a zero of a across the
+#: pendulum's data from one in ~20 (before L of two variables kept one sign), the first of
+#: three 30x behind the others after 1 000 steps on oscillator-family and 7x on the rigid
+#: body (test error 8.2e-2 -> 4.5e-2 with the best of three; docs/zoo.md, *Found outside the
+#: zoo*).
 STARTS, START_STEPS = 3, 1_000
 
 
@@ -41,37 +45,35 @@ def starts_for(config: RunConfig) -> int:
 def best_start(build: Callable[[jax.Array], GenericModel], key: jax.Array, *, starts: int,
                train: Trajectories, valid: Trajectories | None, fit_args: dict[str, Any],
                label: str) -> GenericModel:
-    """Of ``starts`` models ``build(key_i)`` (the first from ``key`` itself), each trained
-    :data:`START_STEPS` steps (at most a tenth of ``fit_args["steps"]``, the stage's cap) with
-    ``fit_args``, the one of lowest validation loss (training loss without validation),
-    trained; a single start is returned untrained. ``label`` names the stage on the line this
-    prints."""
+    """Of ``starts`` initialisations ``build(key_i)`` (the first from ``key`` itself), the one
+    whose training with ``fit_args`` for :data:`START_STEPS` steps (at most a tenth of
+    ``fit_args["steps"]``, the stage's cap) reached the lowest validation loss (training loss
+    without validation), **untrained**: the stage then trains it from its start, so where the
+    first initialisation is best it runs exactly as with one start. ``label`` names the stage
+    on the line this prints."""
     first = build(key)
     if starts <= 1:
         return first
     steps = min(START_STEPS, max(fit_args.get("steps", START_STEPS) // 10, 1))
-    scores, best, best_score = [], first, math.inf
+    scores, chosen, best = [], 0, first
     for i in range(starts):
         start = first if i == 0 else build(jax.random.fold_in(key, i))
         try:
-            fitted, history = fit(start, train, validation=valid, rollout_check=None,
-                                  progress=False, key=jax.random.fold_in(key, starts + i),
-                                  **{**fit_args, "steps": steps, "stopping": None,
-                                     "average": None})
+            _, history = fit(start, train, validation=valid, rollout_check=None,
+                             progress=False, key=jax.random.fold_in(key, starts + i),
+                             **{**fit_args, "steps": steps, "stopping": None, "average": None})
             if history.stopped.startswith("interrupted"):
                 raise KeyboardInterrupt
-            score = history.best_valid
+            score = math.inf if math.isnan(history.best_valid) else history.best_valid
         except TrainingDiverged:
-            fitted, score = start, math.inf
+            score = math.inf
         scores.append(score)
-        if score < best_score:
-            best, best_score = fitted, score
-    print(f"{label}: the best of {starts} initialisations after {steps} steps each "
-          f"(validation losses {', '.join(f'{v:.2e}' for v in scores)})", file=sys.stderr)
+        if score < scores[chosen]:
+            chosen, best = i, start
+    print(f"{label}: initialisation {chosen + 1} of {starts}, trained from its start (validation "
+          f"losses after {steps} steps each: {', '.join(f'{v:.2e}' for v in scores)})",
+          file=sys.stderr)
     return best
-
-if TYPE_CHECKING:
-    from jax.typing import DTypeLike
 
 
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,

@@ -119,11 +119,11 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help="first train L grad E alone (no friction), then add the learned "
                    "friction, so that friction does not carry the motion (see the README; "
                    "default: on when M is learned and neither L nor S is zero)")
-    w.add_argument("--starts", type=int, metavar="K", help="train K initialisations for "
-                   "1000 steps each (at most a tenth of --steps) and go on from the one of "
-                   "lowest validation loss (in the first stage where there is one): a learned "
-                   "L and E can start into a poor minimum (default: 3 where L is learned, "
-                   "else 1)")
+    w.add_argument("--starts", type=int, metavar="K", help="try K initialisations for "
+                   "1000 steps each (at most a tenth of --steps), then train the one of "
+                   "lowest validation loss from its start (in the first stage where there is "
+                   "one): a learned L and E can start into a poor minimum (default: 3 where L "
+                   "is learned, else 1)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
                    "by one standard deviation and quadratic outside it, so that its level sets "

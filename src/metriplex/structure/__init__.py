@@ -17,6 +17,7 @@ from .lie_poisson import LiePoisson as LiePoisson
 from .masked import MaskedFriction as MaskedFriction
 from .masked import MaskedPoisson as MaskedPoisson
 from .poisson import KnownPoisson as KnownPoisson
+from .poisson import PlanarPoisson as PlanarPoisson
 from .poisson import ProjectedSkewMLPPoisson as ProjectedSkewMLPPoisson
 from .poisson import SkewMLPPoisson as SkewMLPPoisson
 from .poisson import ZeroPoisson as ZeroPoisson

@@ -6,6 +6,7 @@ passed so that exactly degenerate variants (:math:`L\nabla S = 0` by constructio
 
 from __future__ import annotations
 
+import abc
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -16,7 +17,7 @@ import numpy as np
 from .._errors import MetriplexError
 from .._types import Matrix, State
 from ._mlp import ACTIVATION, DEPTH, WIDTH
-from ._mlp import FoldedHead, Hidden, check_variables, folded_network, network_spec
+from ._mlp import FoldedHead, Hidden, check_variables, folded_network, network_spec, softplus
 from ._abstract import AbstractPoisson
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
@@ -24,15 +25,10 @@ from ._projection import AbstractProjected
 from .scaling import Scaling, scaling_spec, standardise_state
 
 
-@register("poisson", "neural")
-class SkewMLPPoisson(AbstractPoisson):
-    r"""Learned :math:`L(x)` from exactly :math:`n(n-1)/2` network outputs.
-
-    The outputs fill the strict upper triangle; the lower triangle is their negative and the
-    diagonal is zero, so :math:`L^\top = -L` holds exactly for any weights. With a
-    :class:`~metriplex.structure.scaling.Scaling`, the network works on standardised states and
-    :math:`L = D\tilde L D^\top` (folded into the last layer).
-    """
+class _AbstractSkewNetwork(AbstractPoisson):
+    """What the learned Poisson networks share: a hidden stack on standardised states and a
+    folded skew head (:func:`~metriplex.structure._mlp.folded_network`), built from the same
+    options and saved as the same spec under their own kind."""
 
     hidden: Hidden
     head: FoldedHead
@@ -45,9 +41,7 @@ class SkewMLPPoisson(AbstractPoisson):
         scaling: Scaling | None = None,
         key: jax.Array,
     ) -> None:
-        check_variables(n, 2, "a learned Poisson bivector",
-                        fix="With one variable the only antisymmetric L is 0: pass --poisson "
-                        "zero (in Python, ZeroPoisson(1)).")
+        self._check(n)
         self.n = n
         self.scaling = scaling
         self.hidden, self.head = folded_network(
@@ -55,13 +49,16 @@ class SkewMLPPoisson(AbstractPoisson):
             scaling=scaling, init_scale=1.0, key=key,
         )
 
-    uses_gradient: ClassVar[bool] = False
+    @staticmethod
+    @abc.abstractmethod
+    def _check(n: int) -> None:
+        """Raise unless the block can be built for ``n`` variables."""
 
-    def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
+    def _network(self, x: State) -> Matrix:
         return self.head(self.hidden(standardise_state(x, self.scaling)))
 
     def spec(self) -> dict[str, Any]:
-        return network_spec("neural", self.hidden, scaling=scaling_spec(self.scaling))
+        return network_spec(self.kind, self.hidden, scaling=scaling_spec(self.scaling))
 
     @staticmethod
     def spec_options(spec: dict[str, Any]) -> dict[str, Any]:
@@ -69,10 +66,65 @@ class SkewMLPPoisson(AbstractPoisson):
         return network_kwargs(spec)
 
     @classmethod
-    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "SkewMLPPoisson":
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> Any:
         """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
         ``key`` draws weights that the model file then overwrites."""
         return cls(n, **cls.spec_options(spec), key=key)
+
+
+@register("poisson", "neural")
+class SkewMLPPoisson(_AbstractSkewNetwork):
+    r"""Learned :math:`L(x)` from exactly :math:`n(n-1)/2` network outputs.
+
+    The outputs fill the strict upper triangle; the lower triangle is their negative and the
+    diagonal is zero, so :math:`L^\top = -L` holds exactly for any weights. With a
+    :class:`~metriplex.structure.scaling.Scaling`, the network works on standardised states and
+    :math:`L = D\tilde L D^\top` (folded into the last layer).
+    """
+
+    uses_gradient: ClassVar[bool] = False
+
+    @staticmethod
+    def _check(n: int) -> None:
+        check_variables(n, 2, "a learned Poisson bivector",
+                        fix="With one variable the only antisymmetric L is 0: pass --poisson "
+                        "zero (in Python, ZeroPoisson(1)).")
+
+    def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
+        return self._network(x)
+
+
+@register("poisson", "planar")
+class PlanarPoisson(_AbstractSkewNetwork):
+    r"""Learned :math:`L(x) = a(x)\,J` of two variables with :math:`a > 0` everywhere.
+
+    In two variables every antisymmetric :math:`L` is :math:`a(x) J`,
+    :math:`J = \begin{pmatrix}0&1\\-1&0\end{pmatrix}`, and satisfies the Jacobi identity.
+    Wherever the state moves, :math:`a \ne 0` (:math:`\dot x = a J\nabla E`), so over
+    connected data :math:`a` keeps one sign, and that sign is a gauge of a learned energy
+    (:math:`(a, E) \to (-a, -E)`): :math:`a > 0` restricts nothing then. A network of free
+    sign lets training put a zero of :math:`a` across the data, which :math:`a\nabla E` cannot
+    fit without a singular :math:`E`; from most initialisations on a double well it does
+    (docs/zoo.md). Here :math:`a = r\,\mathrm{softplus}(z(\tilde x))` with :math:`z` the
+    network's output and :math:`r > 0` the scaling's congruence factor. With a given energy
+    of the other orientation, use :class:`SkewMLPPoisson`.
+    """
+
+    uses_gradient: ClassVar[bool] = False
+
+    @staticmethod
+    def _check(n: int) -> None:
+        if n != 2:
+            raise MetriplexError(
+                f"PlanarPoisson is L = a(x) J for two variables; got n={n}. For other sizes "
+                "use SkewMLPPoisson (--poisson neural picks it)."
+            )
+
+    def __call__(self, x: State, grad_entropy: State | None = None) -> Matrix:
+        # The head folds the positive congruence r into the entry (0, 1): z = entry / r.
+        r = 1.0 if self.head.row_scale is None else self.head.row_scale[1]
+        a = r * softplus(self._network(x)[0, 1] / r)
+        return a * jnp.asarray([[0.0, 1.0], [-1.0, 0.0]], x.dtype)
 
 
 @register("poisson", "canonical")
