@@ -85,3 +85,26 @@ def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys):
     assert "starts: initialisation" in err and "after 20 steps each" in err
     header = json.loads((tmp_path / "run" / "config.json").read_text())
     assert header["decided"]["starts"] == 2
+
+
+def test_the_starts_share_the_stage_wall_time_cap(monkeypatch):
+    # --max-minutes caps the stages together: each start gets what the ones before it left
+    # (at least a second), and none is capped without a cap. The clock advances 10 s a read.
+    import itertools
+
+    clock = itertools.count(0.0, 10.0)
+    monkeypatch.setattr(_stages.time, "perf_counter", lambda: next(clock))
+    caps = []
+
+    def fit(start, train, **kwargs):
+        caps.append(kwargs["max_seconds"])
+        return start, History(best_valid=1.0, stopped="step budget reached")
+
+    monkeypatch.setattr(_stages, "fit", fit)
+    _stages.best_start(lambda k: "start", jr.key(0), starts=3, train=None, valid=None,
+                       fit_args=dict(max_seconds=25.0), label="starts")
+    assert caps == [15.0, 5.0, 1.0]
+    caps.clear()
+    _stages.best_start(lambda k: "start", jr.key(0), starts=2, train=None, valid=None,
+                       fit_args={}, label="starts")
+    assert caps == [None, None]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+import time
 from typing import TYPE_CHECKING, Any, Callable
 
 import equinox as eqx
@@ -34,6 +35,12 @@ if TYPE_CHECKING:
 STARTS, START_STEPS = 3, 1_000
 
 
+def _left(max_seconds: float | None, since: float) -> float | None:
+    """What is left of a wall-time cap ``max_seconds`` counted from ``since`` (a
+    ``time.perf_counter()`` reading): at least a second, so that a stage still evaluates."""
+    return None if max_seconds is None else max(max_seconds - (time.perf_counter() - since), 1.0)
+
+
 def starts_for(config: RunConfig) -> int:
     """How many initialisations training tries (``--starts``); left out: :data:`STARTS`
     where L is learned, else 1."""
@@ -56,12 +63,14 @@ def best_start(build: Callable[[jax.Array], GenericModel], key: jax.Array, *, st
         return first
     steps = min(START_STEPS, max(fit_args.get("steps", START_STEPS) // 10, 1))
     scores, chosen, best = [], 0, first
+    began = time.perf_counter()
     for i in range(starts):
         start = first if i == 0 else build(jax.random.fold_in(key, i))
-        try:
+        try:  # the tries share the stage's wall-time cap, if any
             _, history = fit(start, train, validation=valid, rollout_check=None,
                              progress=False, key=jax.random.fold_in(key, starts + i),
-                             **{**fit_args, "steps": steps, "stopping": None, "average": None})
+                             **{**fit_args, "steps": steps, "stopping": None, "average": None,
+                                "max_seconds": _left(fit_args.get("max_seconds"), began)})
             if history.stopped.startswith("interrupted"):
                 raise KeyboardInterrupt
             score = math.inf if math.isnan(history.best_valid) else history.best_valid
@@ -97,6 +106,7 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                 w_temperature=temperature_weight(config),
                                 confine=confine_on(config))
     init_key, key = jax.random.split(key)
+    began = time.perf_counter()
     loss = build_loss(first, units)
     start = best_start(
         lambda k: with_dtype(build_model(first, train, key=k, units=units, constant=constant),
@@ -107,7 +117,8 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     try:
         fitted, history = fit(
             start, train, loss=loss, validation=valid,
-            max_seconds=max_seconds, scale=units.rate, dtype=dtype, progress=progress,
+            max_seconds=_left(max_seconds, began), scale=units.rate, dtype=dtype,
+            progress=progress,
             rollout_check=None, key=key, **fit_settings(first),
         )
         stopped = history.stopped

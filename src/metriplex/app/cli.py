@@ -137,8 +137,8 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--steps", type=int, help=f"the most optimiser steps of each training stage "
                    f"(default {d.steps}); training usually stops earlier, when the held-out "
                    "rollouts stop improving")
-    w.add_argument("--max-minutes", type=float, help="stop training after this many minutes "
-                   "(default: no time limit)")
+    w.add_argument("--max-minutes", type=float, help="stop training after this many minutes, "
+                   "the starts and stages together (default: no time limit)")
     w.add_argument("--batch-size", type=int, help=f"pairs per step (default {d.batch_size})")
     w.add_argument("--validation", type=float,
                    help="fraction of the selected trajectories held out for validation, drawn "
