@@ -230,9 +230,12 @@ def cli_options(data: Path, name: str, batch: int, steps: int, out: Path) -> lis
     # --steps caps each stage, so a run of N steps would time N steps of both stages. Without
     # it the one stage is the configuration's whole training (M grad E = 0 as a penalty, as
     # before the first stage was a default), and the plain step is built from that model.
+    # --starts 1: where L is learned, training first tries three initialisations for a tenth
+    # of --steps each, which the difference of two runs would count as steps.
     return ["train", str(data), "--out", str(out), "--quiet", "--steps", str(steps),
             "--eval-every", str(steps), "--batch-size", str(batch),
-            "--validation", str(VALID_FRACTION), "--no-reversible-first", *CONFIGS[name][0]]
+            "--validation", str(VALID_FRACTION), "--no-reversible-first", "--starts", "1",
+            *CONFIGS[name][0]]
 
 
 # ------------------------------------------------------------------------------------------
