@@ -167,6 +167,9 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     assert r["reference_residual"]["passed"] is not False
     assert r["residual_ratio"]["passed"] is False and r["residual_ratio"]["value"] > 2
     assert v["statement"].startswith("NOT consistent with GENERIC (as fitted): residual_ratio")
+    # It names the commonest cause: energy exchanged with something outside the data.
+    assert v["statement"].endswith("add the variable that takes it (an entropy, a temperature, "
+                                   "a bath's energy), if it was recorded.")
     # The same model with a training that did not converge: the evidence is not sound.
     v2 = verdict(model, pumped, report=report, converged=False,
                  stopped="step budget reached (300 steps)", reference=reference)

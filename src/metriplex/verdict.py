@@ -175,6 +175,14 @@ class Thresholds:
     step_sensitivity: float = 0.1
 
 
+#: What a NOT-consistent statement adds: the commonest cause on data from a real system (a
+#: damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
+MISSING_VARIABLE = ("A system that loses energy to, or gains it from, something outside the "
+                    "data (heat in a medium, a drive) has no GENERIC model in these variables: "
+                    "add the variable that takes it (an entropy, a temperature, a bath's "
+                    "energy), if it was recorded.")
+
+
 def verdict(
     model: GenericModel,
     data: Trajectories,
@@ -300,7 +308,7 @@ def verdict(
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(said(r) for r in failed) + ("; " + "; ".join(laws) if laws
-                                                            else "") + ".")
+                                                            else "") + ". " + MISSING_VARIABLE)
     else:
         statement = ("cannot tell whether the data are consistent with GENERIC: "
                      + "; ".join(said(r) for r in failed) + ".")
