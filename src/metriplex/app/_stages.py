@@ -85,6 +85,21 @@ def best_start(build: Callable[[jax.Array], GenericModel], key: jax.Array, *, st
     return best
 
 
+def _best_initialisation(config: RunConfig, key: jax.Array, *, starts: int, label: str,
+                         train: Trajectories, valid: Trajectories | None, units: Units,
+                         constant: tuple[int, ...], dtype: DTypeLike, loss: Any,
+                         given: Given | None = None,
+                         max_seconds: float | None = None) -> GenericModel:
+    """:func:`best_start` over the models ``config`` describes, each tried with its training
+    settings and ``loss``."""
+    return best_start(
+        lambda k: with_dtype(build_model(config, train, key=k, units=units, constant=constant,
+                                         given=given), dtype),
+        key, starts=starts, train=train, valid=valid, label=label,
+        fit_args=dict(fit_settings(config), loss=loss, scale=units.rate, dtype=dtype,
+                      max_seconds=max_seconds))
+
+
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
                      valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
                      dtype: DTypeLike, key: jax.Array, progress: bool = False,
@@ -108,12 +123,10 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     init_key, key = jax.random.split(key)
     began = time.perf_counter()
     loss = build_loss(first, units)
-    start = best_start(
-        lambda k: with_dtype(build_model(first, train, key=k, units=units, constant=constant),
-                             dtype),
-        init_key, starts=starts_for(config), train=train, valid=valid, label="reversible first",
-        fit_args=dict(fit_settings(first), loss=loss, scale=units.rate, dtype=dtype,
-                      max_seconds=max_seconds))
+    start = _best_initialisation(first, init_key, starts=starts_for(config),
+                                 label="reversible first", train=train, valid=valid,
+                                 units=units, constant=constant, dtype=dtype, loss=loss,
+                                 max_seconds=max_seconds)
     try:
         fitted, history = fit(
             start, train, loss=loss, validation=valid,
@@ -150,9 +163,7 @@ def before_main(model: GenericModel, config: RunConfig, train: Trajectories,
     starts = starts_for(config)
     if starts <= 1:
         return model
-    return best_start(
-        lambda k: with_dtype(build_model(config, train, key=k, units=units, constant=constant,
-                                         given=given), dtype),
-        model_key, starts=starts, train=train, valid=valid, label="starts",
-        fit_args=dict(fit_settings(config), loss=build_loss(config, units), scale=units.rate,
-                      dtype=dtype, max_seconds=max_seconds))
+    return _best_initialisation(config, model_key, starts=starts, label="starts", train=train,
+                                valid=valid, units=units, constant=constant, dtype=dtype,
+                                loss=build_loss(config, units), given=given,
+                                max_seconds=max_seconds)

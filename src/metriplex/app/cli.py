@@ -19,6 +19,7 @@ from .._errors import MetriplexError
 from ..integrate import ROOT_FINDERS, SCHEMES
 from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
+from ._stages import START_STEPS, STARTS
 from .config import FEATURES
 
 __all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate",
@@ -120,10 +121,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "friction, so that friction does not carry the motion (see the README; "
                    "default: on when M is learned and neither L nor S is zero)")
     w.add_argument("--starts", type=int, metavar="K", help="try K initialisations for "
-                   "1000 steps each (at most a tenth of --steps), then train the one of "
+                   f"{START_STEPS} steps each (at most a tenth of --steps), then train the one of "
                    "lowest validation loss from its start (in the first stage where there is "
-                   "one): a learned L and E can start into a poor minimum (default: 3 where L "
-                   "is learned, else 1)")
+                   "one): a learned L and E can start into a poor minimum (default: "
+                   f"{STARTS} where L is learned, else 1)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
                    "by one standard deviation and quadratic outside it, so that its level sets "
