@@ -111,3 +111,18 @@ def test_a_learned_s_beside_a_given_l_is_one_of_its_casimirs(tmp_path):
     assert casimir_variables(RunConfig(poisson="canonical:1", entropy="sum:2"),
                              mx.CanonicalPoisson(3, 1)) is None
     assert casimir_variables(RunConfig(poisson="zero"), mx.ZeroPoisson(3)) is None
+
+
+def test_activation_reaches_every_learned_network(tmp_path):
+    """``--activation`` (RunConfig.activation) builds every learned block with it, and the
+    model file keeps it."""
+    data = make_data(damped_oscillator(), oscillator_x0(4), 0.1, 10, names=("q", "p", "s"))
+    model = build_model(RunConfig(activation="tanh", width=8, reversible_first=False), data,
+                        key=jr.key(0))
+    saved = tmp_path / "m.mpx"
+    mx.save(saved, model, n=3)
+    spec = mx.load(saved).spec()
+    learned = [name for name in ("energy", "entropy", "poisson", "friction")
+               if "activation" in spec[name]]
+    assert learned == ["energy", "entropy", "poisson", "friction"], spec
+    assert all(spec[name]["activation"] == "tanh" for name in learned), spec

@@ -120,6 +120,7 @@ def nothing_written(folder):
         (["--batch-size", "0"], r"--batch-size must be >= 1 \(pairs per optimiser step\); got 0",
          ()),
         (["--width", "0"], r"--width must be >= 1 .*; got 0", ()),
+        (["--activation", "relu"], r"argument --activation: invalid choice: 'relu'", ("usage:",)),
         (["--eval-every", "-1"], r"--eval-every must be >= 1 .*; got -1", ()),
         (["--jacobi", "stochastic", "--jacobi-probes", "0"],
          r"--jacobi-probes must be >= 1 .*; got 0", ("JacobiPenalty", "StochasticJacobi")),

@@ -17,6 +17,7 @@ from ._commands import (cmd_evaluate, cmd_generate, cmd_reproduce, cmd_rollout, 
                         cmd_train)
 from .._errors import MetriplexError
 from ..integrate import ROOT_FINDERS, SCHEMES
+from ..structure._mlp import ACTIVATIONS
 from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
 from ._stages import START_STEPS, STARTS
@@ -132,6 +133,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "S is given as a sum, --entropy sum:..., and M grad E = 0 is exact)")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
+    w.add_argument("--activation", choices=sorted(ACTIVATIONS),
+                   help=f"hidden-layer activation of every learned network, all smooth as the "
+                   f"gradients of E and S need (default {d.activation})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
     w.add_argument("--weight-decay", type=float,
                    help=f"AdamW weight decay (default {d.weight_decay})")

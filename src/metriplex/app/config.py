@@ -17,6 +17,7 @@ from typing import Any
 from .._errors import MetriplexError, expect_integer
 from .._solve._implicit import _AbstractImplicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
+from ..structure._mlp import ACTIVATION, ACTIVATIONS
 from ..structure.potential import FeatureMap
 
 from ._choices import (  # noqa: F401
@@ -88,7 +89,7 @@ class RunConfig:
     quadratic: bool = False
     width: int = 64
     depth: int = 2
-    activation: str = "softplus"
+    activation: str = ACTIVATION
     lr: float = 1e-2
     weight_decay: float = 0.0
     steps: int = 100_000
@@ -243,6 +244,12 @@ def validate(config: RunConfig, n: int) -> None:
         raise MetriplexError(
             f"--schedule must be one of {', '.join(SCHEDULES)}; got {config.schedule!r}. "
             "Example: --schedule plateau."
+        )
+    if config.activation not in ACTIVATIONS:
+        raise MetriplexError(
+            f"--activation must be one of {', '.join(sorted(ACTIVATIONS))} (smooth, as the "
+            f"gradients of E and S need); got {config.activation!r}. Example: --activation "
+            f"{ACTIVATION}."
         )
     if config.max_minutes is not None and not config.max_minutes > 0:
         raise MetriplexError(f"--max-minutes must be > 0; got {config.max_minutes}.")
