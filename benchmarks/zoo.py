@@ -52,6 +52,8 @@ BAR = 2e-2
 
 
 def _coerce(value: str):
+    if value.lower() in ("true", "false"):  # "False" as a string would be truthy
+        return value.lower() == "true"
     for kind in (int, float):
         try:
             return kind(value)
