@@ -16,6 +16,17 @@ from .._errors import MetriplexError
 from ._checks import _h5_reason, _q, _text, _Unsupported
 
 
+def _sparse_arrays() -> dict[str, bool]:
+    """``loadmat``'s ``spmatrix=False`` where SciPy has the choice (sparse arrays, the default
+    from SciPy 1.20, which warns of the change before): both kinds are read dense alike."""
+    import inspect
+
+    import scipy.io
+
+    has_choice = "spmatrix" in inspect.signature(scipy.io.loadmat).parameters
+    return {"spmatrix": False} if has_choice else {}
+
+
 def _load_mat(path: Path) -> dict[str, Any]:
     import h5py
 
@@ -37,7 +48,7 @@ def _load_mat(path: Path) -> dict[str, Any]:
             warnings.simplefilter("error", MatReadWarning)
             raw = scipy.io.loadmat(
                 path, squeeze_me=False, chars_as_strings=True, struct_as_record=True,
-                verify_compressed_data_integrity=True,
+                verify_compressed_data_integrity=True, **_sparse_arrays(),
             )
     except NotImplementedError as e:
         raise MetriplexError(f"MAT file {_q(path)} uses an unsupported format ({e}).") from None
