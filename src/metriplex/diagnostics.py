@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
@@ -45,6 +46,7 @@ ROLLOUT_BATCH_STATES = 50_000
 ROLLOUT_BATCHES = 10
 
 
+@in_full_precision
 def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractScheme | None = None,
                  progress: bool = False,
                  retry: int = RETRY_SUBSTEPS) -> tuple[Rollout, np.ndarray, np.ndarray]:
@@ -104,6 +106,7 @@ def _field_and_entropy_gradient(model, xs):
     return jax.vmap(model.vector_field)(xs), jax.vmap(jax.grad(model.entropy))(xs)
 
 
+@in_full_precision
 def evaluate(
     model: GenericModel,
     data: Trajectories,

@@ -17,6 +17,7 @@ import jax.random as jr
 import numpy as np
 import optax
 
+from ._precision import in_full_precision
 from ._errors import MetriplexError
 from ._fit_loop import Evaluation, FitLoop
 from ._fit_options import Checkpoint, LBFGSFinish
@@ -50,6 +51,7 @@ __all__ = ["Average", "Checkpoint", "History", "LBFGSFinish", "Plateau", "Rollou
            "adjustable_optimizer", "default_optimizer", "fit"]
 
 
+@in_full_precision
 def fit(
     model: AbstractModel,
     data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],

@@ -133,6 +133,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ._precision import in_full_precision
 from ._errors import MetriplexError
 from ._model import GenericModel, float_dtype
 # The black-box reference and the measurements on the held-out pairs; BlackBoxModel, Reference
@@ -183,6 +184,7 @@ MISSING_VARIABLE = ("A system that loses energy to, or gains it from, something 
                     "energy), if it was recorded.")
 
 
+@in_full_precision
 def verdict(
     model: GenericModel,
     data: Trajectories,

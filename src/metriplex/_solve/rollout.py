@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._precision import in_full_precision
 from .._errors import MetriplexError, RolloutFailure, expect_integer
 from .._model import AbstractModel
 from .._types import Array, Float, Int
@@ -174,6 +175,7 @@ def model_size(model: AbstractModel) -> int | None:
     return model.size()
 
 
+@in_full_precision
 def solve(
     model: AbstractModel,
     x0: Float[Array, "*batch n"],
@@ -229,6 +231,7 @@ def _solve(model, x0, ts, scheme, retry=0) -> Rollout:
     return Rollout(ts, xs, failed, its)
 
 
+@in_full_precision
 def simulate(
     model: AbstractModel,
     x0: Float[Array, "*batch n"],

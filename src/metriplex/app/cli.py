@@ -16,6 +16,7 @@ from typing import Any, NoReturn
 from ._commands import (cmd_evaluate, cmd_generate, cmd_reproduce, cmd_rollout, cmd_simulate,
                         cmd_train)
 from .._errors import MetriplexError
+from .._precision import full_precision
 from ..integrate import ROOT_FINDERS, SCHEMES
 from ..structure._mlp import ACTIVATIONS
 from ..io._registry import layouts_text, suffixes_text
@@ -374,7 +375,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.unrecognised(args.command, extra)
     return_large_blocks()
     try:
-        code = args.func(args)
+        with full_precision():  # float32 products in float32 on GPUs too (metriplex._precision)
+            code = args.func(args)
     except MetriplexError as e:
         print(f"metriplex {args.command}: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
