@@ -13,12 +13,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
 from .structure import SumOf
 
 _TINY = 1e-300
 
 
+@in_full_precision
 def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256,
                         scale: np.ndarray | None = None) -> dict:
     r"""Degeneracy, Jacobi and PSD diagnostics at states ``x`` (subsampled to ``max_states``).

@@ -84,6 +84,7 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths
 
 
+@in_full_precision
 def potential_along(model: GenericModel, fn: Callable[[jax.Array], jax.Array],
                     xs: np.ndarray) -> np.ndarray:
     """A potential of ``model`` (``fn``: ``model.energy`` or ``model.entropy``) at every state of
@@ -263,6 +264,7 @@ SENSITIVITY_STEPS = 200
 SENSITIVITY_TRAJECTORIES = 10
 
 
+@in_full_precision
 def step_sensitivity(model: GenericModel, data: Trajectories, *,
                      scheme: AbstractScheme | None = None, refine: int = SENSITIVITY_REFINE,
                      steps: int = SENSITIVITY_STEPS,
@@ -336,6 +338,7 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
 PRODUCTION_TOLERANCE = 1e-2
 
 
+@in_full_precision
 def entropy_production_negative_fraction(model: GenericModel, states: np.ndarray,
                                          scale: np.ndarray, *, max_states: int = 2048) -> float:
     r"""The fraction of ``states`` at which the model's own flow decreases its entropy.
