@@ -126,3 +126,12 @@ def test_activation_reaches_every_learned_network(tmp_path):
                if "activation" in spec[name]]
     assert learned == ["energy", "entropy", "poisson", "friction"], spec
     assert all(spec[name]["activation"] == "tanh" for name in learned), spec
+
+
+def test_an_unknown_activation_is_refused_by_name():
+    """A configuration from Python or a config.json (not argparse's choices) names the rule."""
+    from metriplex.app.config import validate
+
+    with pytest.raises(mx.MetriplexError, match=r"--activation must be one of gelu, silu, "
+                       r"softplus, tanh .*; got 'relu'\. Example: --activation softplus\."):
+        validate(RunConfig(activation="relu"), 3)
