@@ -18,7 +18,7 @@ from ._commands import (cmd_evaluate, cmd_generate, cmd_reproduce, cmd_rollout, 
 from .._errors import MetriplexError
 from .._precision import full_precision
 from ..integrate import ROOT_FINDERS, SCHEMES
-from ..structure._mlp import ACTIVATIONS
+from ..structure import ACTIVATIONS
 from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
 from ._stages import START_STEPS, STARTS

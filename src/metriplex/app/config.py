@@ -17,7 +17,7 @@ from typing import Any
 from .._errors import MetriplexError, expect_integer
 from .._solve._implicit import _AbstractImplicit
 from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
-from ..structure._mlp import ACTIVATION, ACTIVATIONS
+from ..structure import ACTIVATION, ACTIVATIONS
 from ..structure.potential import FeatureMap
 
 from ._choices import (  # noqa: F401

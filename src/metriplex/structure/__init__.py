@@ -14,6 +14,8 @@ from .poisson import CanonicalPoisson as CanonicalPoisson
 from .casimir import CasimirPoisson3 as CasimirPoisson3
 from .casimir import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .lie_poisson import LiePoisson as LiePoisson
+from ._mlp import ACTIVATION as ACTIVATION
+from ._mlp import ACTIVATIONS as ACTIVATIONS
 from .masked import MaskedFriction as MaskedFriction
 from .masked import MaskedPoisson as MaskedPoisson
 from .poisson import KnownPoisson as KnownPoisson
