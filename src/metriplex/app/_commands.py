@@ -99,17 +99,18 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path, *,
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
         ended += "; the best model is the last one: not converged, allow more --steps"
-    if history.best_step == 0 and last > 0 and first_stage:
-        # The main stage starts from the first stage's E and L: its step 0 is a trained model.
-        ended += ("; the main stage's start (the first stage's model with an untrained "
-                  "friction) rolled out the held-out trajectories best (kept); if its error "
-                  "below is poor, the first stage can have stalled: try another --seed, or "
-                  "--no-reversible-first")
-    elif history.best_step == 0 and last > 0:
-        ended += ("; NO trained model rolled out the held-out trajectories better than the "
-                  "untrained one (kept): either the data do not determine the dynamics away "
-                  "from the training trajectories (give more trajectories or more of the "
-                  "structure), or training ended in a poor fit (try another --seed)")
+    if history.best_step == 0 and last > 0:
+        if first_stage:  # the main stage starts from the first stage's E and L: a trained model
+            ended += ("; the main stage's start (the first stage's model with an untrained "
+                      "friction) rolled out the held-out trajectories best (kept); if its "
+                      "error below is poor, the first stage can have stalled: try another "
+                      "--seed, or --no-reversible-first")
+        else:
+            ended += ("; NO trained model rolled out the held-out trajectories better than "
+                      "the untrained one (kept): either the data do not determine the "
+                      "dynamics away from the training trajectories (give more trajectories or "
+                      "more of the structure), or training ended in a poor fit (try another "
+                      "--seed)")
     k = metrics.get("trajectories", 0)
     failed = metrics.get("rollout_failures", 0)
     err = metrics.get("rollout_error_mean")

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 STARTS, START_STEPS = 3, 1_000
 
 
-def _left(max_seconds: float | None, since: float) -> float | None:
+def left_of(max_seconds: float | None, since: float) -> float | None:
     """What is left of a wall-time cap ``max_seconds`` counted from ``since`` (a
     ``time.perf_counter()`` reading): at least a second, so that a stage still evaluates."""
     return None if max_seconds is None else max(max_seconds - (time.perf_counter() - since), 1.0)
@@ -70,7 +70,7 @@ def best_start(build: Callable[[jax.Array], GenericModel], key: jax.Array, *, st
             _, history = fit(start, train, validation=valid, rollout_check=None,
                              progress=False, key=jax.random.fold_in(key, starts + i),
                              **{**fit_args, "steps": steps, "stopping": None, "average": None,
-                                "max_seconds": _left(fit_args.get("max_seconds"), began)})
+                                "max_seconds": left_of(fit_args.get("max_seconds"), began)})
             if history.stopped.startswith("interrupted"):
                 raise KeyboardInterrupt
             score = math.inf if math.isnan(history.best_valid) else history.best_valid
@@ -130,7 +130,7 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     try:
         fitted, history = fit(
             start, train, loss=loss, validation=valid,
-            max_seconds=_left(max_seconds, began), scale=units.rate, dtype=dtype,
+            max_seconds=left_of(max_seconds, began), scale=units.rate, dtype=dtype,
             progress=progress,
             rollout_check=None, key=key, **fit_settings(first),
         )

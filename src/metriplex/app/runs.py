@@ -28,7 +28,7 @@ from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      fit_settings, stopping_for, units_for)
 from ._report import report_figures
-from ._stages import before_main, starts_for
+from ._stages import before_main, left_of, starts_for
 from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on, scheme_from_name,
                      temperature_weight, validate)
 from ..data import Trajectories
@@ -291,8 +291,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
             loss=loss,
             validation=valid,
             # --max-minutes caps both stages together; the main one gets what is left.
-            max_seconds=None if budget is None else max(budget - (time.perf_counter() - began),
-                                                        1.0),
+            max_seconds=left_of(budget, began),
             scale=units.rate,
             dtype=dtype,
             progress=progress,
