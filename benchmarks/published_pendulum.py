@@ -12,6 +12,10 @@ effective constants; initial states are our own choice, see ``PendulumConfig``):
 - ``flow``: the exact flow (fine RK4 substeps), sampled at dt = 0.3;
 - ``dg``: one discrete-gradient step per snapshot, as the published data were made.
 
+Beside the trained GENERIC model, the table shows an unconstrained vector field trained on the
+same data with the same ``fit`` defaults and scheme (``BlackBoxModel``, the
+``zoo.py --black-box`` column): what the data allow a model with no structure at all.
+
 For each, training uses the defaults plus what a user of that dataset knows
 (``--poisson canonical:4 --entropy sum:8,9``) on trajectories 0-39 (validation split from
 them), and the table reports the 10 test trajectories 40-49: plain and standardised rel. L2,
@@ -45,7 +49,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from zoo import _coerce, _fmt, standardised_error  # noqa: E402
+from zoo import _coerce, _fmt, black_box, standardised_error  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
@@ -89,6 +93,7 @@ def run(kind: str, overrides: dict, workdir: Path) -> dict:
         "failed": int(report["rollout_failures"]),
         "truth": {k: v["rollout_error_mean"] for k, v in truth.items()},
         "constant": constant_prediction_error(test),
+        "black_box": black_box(train, test, config),
         "steps": history.step[-1] if history.step else 0,
         "stopped": history.stopped,
         "seconds": seconds,
@@ -116,14 +121,15 @@ def main(argv=None) -> int:
             rows.append(run(kind, overrides, Path(tmp)))
             print(f"  {kind}: done in {time.perf_counter() - t0:.0f} s", flush=True)
     print("\n| data | rel. L2 | over completed | standardised | failed | truth CN | "
-          "truth midpoint | truth DG | x(t) = x(0) | steps | train s |")
-    print("|" + "---|" * 11)
+          "truth midpoint | truth DG | x(t) = x(0) | black box | steps | train s |")
+    print("|" + "---|" * 12)
     for r in rows:
         t = r["truth"]
         print(f"| {r['data']} | {_fmt(r['rel_l2'])} | {_fmt(r['rel_l2_completed'] or np.inf)} | "
               f"{_fmt(r['standardised'])} | {r['failed']}/10 | {_fmt(t['cn'])} | "
               f"{_fmt(t['midpoint'])} | {_fmt(t['discrete-gradient'])} | "
-              f"{_fmt(r['constant'])} | {r['steps']} | {r['seconds']:.0f} |")
+              f"{_fmt(r['constant'])} | {_fmt(r['black_box']['rel_l2'])} "
+              f"({r['black_box']['failed']} failed) | {r['steps']} | {r['seconds']:.0f} |")
     print(f"\nThe peer's published network: {PUBLISHED} on the real dataset.")
     return 0
 

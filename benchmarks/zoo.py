@@ -16,7 +16,14 @@ rollouts from unseen initial conditions (seed 1000) over the case's horizon. Pri
 python benchmarks/zoo.py                         # every case, defaults
 python benchmarks/zoo.py --cases oscillator-bath,heat-exchange --set lr=1e-2
 python benchmarks/zoo.py --out zoo.json          # also write the rows as JSON
+python benchmarks/zoo.py --black-box             # also an unconstrained field, for comparison
 ```
+
+``--black-box`` also trains, on the same training data and split, an unconstrained vector field
+(:class:`metriplex.verdict.BlackBoxModel`, an MLP of the same width and depth as the GENERIC
+model's networks, ``fit``'s defaults and scheme) and adds its standardised error and failed
+rollouts as a column: where it beats the GENERIC model, the structure (or how it is learned)
+costs accuracy on that case; where both miss, the data are the limit.
 
 Cases marked ``held_out`` were not used to choose the defaults (``--tuning`` runs only the
 others, ``--held-out`` only those).
@@ -41,12 +48,18 @@ jax.config.update("jax_enable_x64", True)  # ground truth in float64; training s
 
 import numpy as np  # noqa: E402
 
+import jax.numpy as jnp  # noqa: E402
+import jax.random as jr  # noqa: E402
+
 from metriplex.config import RunConfig, reversible_first_on  # noqa: E402
+from metriplex.data import state_scale, time_scale  # noqa: E402
 from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems.zoo import ZOO  # noqa: E402
+from metriplex.train import fit  # noqa: E402
+from metriplex.verdict import BlackBoxModel  # noqa: E402
 
 BAR = 2e-2
 
@@ -102,7 +115,29 @@ def constant_drift(data, rollout) -> float | None:
     return worst
 
 
-def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
+def black_box(train, test, config: RunConfig) -> dict:
+    """Standardised rel. L2 and failed rollouts on ``test`` of an unconstrained field trained
+    on ``train`` with ``fit``'s defaults, the same split, scheme, width, depth and precision
+    as ``config``'s GENERIC model (activation: softplus)."""
+    d = state_scale(train.x)
+    rate = d / time_scale(train, d)
+    dtype = jnp.float64 if config.float64 else jnp.float32
+    box = BlackBoxModel(train.n, width=config.width, depth=config.depth, data=train.x, rate=rate,
+                        key=jr.key(config.seed))
+    scheme = scheme_from_name(config.scheme)
+    t0 = time.perf_counter()
+    box, history = fit(box, train, loss=None, scale=rate, dtype=dtype, seed_split=config.seed,
+                       progress=False, key=jr.key(config.seed + 1))
+    seconds = time.perf_counter() - t0
+    error, _ = standardised_error(box, test, scheme)
+    report = evaluate(box, test, scheme=scheme)
+    return {"standardised": error, "rel_l2": report["rollout_error_mean"],
+            "failed": int(report["rollout_failures"]),
+            "steps": history.step[-1] if history.step else 0, "seconds": seconds}
+
+
+def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
+             with_black_box: bool = False) -> dict:
     system = case.system
     t0 = time.perf_counter()
     train = generate(system, trajectories=case.trajectories, steps=case.steps, dt=case.dt,
@@ -145,6 +180,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0) -> dict:
         "converged": history.converged,
         "data_seconds": gen_seconds,
         "overrides": overrides,
+        "black_box": black_box(train, test, config) if with_black_box else None,
     }
 
 
@@ -169,11 +205,18 @@ def _fmt(v: float) -> str:
     return "inf" if not np.isfinite(v) else f"{v:.2e}"
 
 
+def _black_box(row: dict) -> str:
+    b = row.get("black_box")
+    return "" if b is None else f" {_fmt(b['standardised'])} ({b['failed']} failed) |"
+
+
 def print_table(rows: list[dict], file=sys.stdout) -> None:
+    boxed = any(r.get("black_box") is not None for r in rows)
     head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | "
-            "L∇E share (true) | steps | kept | train s | bar |")
+            "L∇E share (true) | steps | kept | train s | bar |"
+            + (" black box, standardised |" if boxed else ""))
     print(head, file=file)
-    print("|" + "---|" * 12, file=file)
+    print("|" + "---|" * (12 + boxed), file=file)
     for r in rows:
         met = r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
         name = r["system"] + (" (held out)" if r["held_out"] else "")
@@ -182,7 +225,7 @@ def print_table(rows: list[dict], file=sys.stdout) -> None:
             f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/{r['test_trajectories']} | "
             f"{_fmt(r['ground_truth_cn_rel_l2'])} | {_share(r)} | {r['steps']} | {_kept(r)} | "
             f"{r['train_seconds']:.0f} | "
-            f"{'met' if met else 'NOT met'} |",
+            f"{'met' if met else 'NOT met'} |{_black_box(r)}",
             file=file, flush=True,
         )
     met = sum(r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
@@ -205,6 +248,8 @@ def main(argv=None) -> int:
                    help="override a training setting (RunConfig field), e.g. lr=1e-2")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", help="also write the rows to this JSON file")
+    p.add_argument("--black-box", action="store_true",
+                   help="also train an unconstrained field on the same data, for comparison")
     args = p.parse_args(argv)
     overrides = {}
     for item in args.set:
@@ -224,7 +269,8 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
-            row = run_case(case, overrides, Path(tmp), seed=args.seed)
+            row = run_case(case, overrides, Path(tmp), seed=args.seed,
+                           with_black_box=args.black_box)
             rows.append(row)
             print(f"  {row['system']}: rel. L2 {_fmt(row['rel_l2'])}, standardised "
                   f"{_fmt(row['rel_l2_standardised'])}, failed {row['failed']}, "
