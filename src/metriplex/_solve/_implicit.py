@@ -16,7 +16,7 @@ from ._scheme import AbstractScheme
 from .root_finder import AbstractRootFinder, FixedPointThenNewton
 
 
-class _AbstractImplicit(AbstractScheme):
+class AbstractImplicitScheme(AbstractScheme):
     r"""A step :math:`x_1 = x_0 + \Delta t\,\bar f(x_0, x_1)`, solved by ``root_finder``.
 
     ``root_finder``: how the step is solved, an :class:`~metriplex.integrate.AbstractRootFinder`
@@ -61,6 +61,8 @@ class _AbstractImplicit(AbstractScheme):
         """The scheme's average of the vector field over the step, ``(x1 - x0)/dt``."""
 
     def increment(self, model: GenericModel, x0: State, x1: State) -> State:
+        """The step's average of the vector field between ``x0`` and ``x1`` (:meth:`average`
+        with its :meth:`start`)."""
         return self.average(model, x0, x1, self.start(model, x0))
 
     def differentiable_step(self, model: GenericModel, x: State, dt: Scalar | float,

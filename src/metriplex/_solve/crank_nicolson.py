@@ -6,10 +6,10 @@ from typing import ClassVar
 
 from .._model import GenericModel, Terms
 from .._types import Scalar, State
-from ._implicit import _AbstractImplicit
+from ._implicit import AbstractImplicitScheme
 
 
-class CrankNicolson(_AbstractImplicit):
+class CrankNicolson(AbstractImplicitScheme):
     r"""Crank–Nicolson (trapezoidal rule): :math:`\frac{x_{n+1}-x_n}{\Delta t} =
     \tfrac12\big(f(x_n) + f(x_{n+1})\big)`. Second order; the seed paper's scheme."""
 

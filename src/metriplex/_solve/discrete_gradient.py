@@ -11,7 +11,7 @@ import numpy as np
 
 from .._model import GenericModel, Terms
 from .._types import Scalar, State
-from ._implicit import _AbstractImplicit
+from ._implicit import AbstractImplicitScheme
 
 
 def _sum(a):
@@ -102,7 +102,7 @@ def discrete_generic_field(model: GenericModel, x0: State, x1: State, energy0: S
     return reversible + irreversible
 
 
-class DiscreteGradient(_AbstractImplicit):
+class DiscreteGradient(AbstractImplicitScheme):
     r"""Structure-preserving discrete-gradient GENERIC step (Gonzalez 1996; Öttinger 2018;
     Romero 2009):
 

@@ -6,10 +6,10 @@ from typing import Any, ClassVar
 
 from .._model import GenericModel, Terms
 from .._types import Scalar, State
-from ._implicit import _AbstractImplicit
+from ._implicit import AbstractImplicitScheme
 
 
-class ImplicitMidpoint(_AbstractImplicit):
+class ImplicitMidpoint(AbstractImplicitScheme):
     r"""Implicit midpoint: :math:`\frac{x_{n+1}-x_n}{\Delta t} = f\big(\tfrac{x_n+x_{n+1}}2\big)`.
     Second order, symplectic; conserves quadratic invariants exactly."""
 

@@ -15,7 +15,7 @@ from .._errors import MetriplexError, RolloutFailure, expect_integer
 from .._model import AbstractModel
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
-from ._implicit import _AbstractImplicit
+from ._implicit import AbstractImplicitScheme
 from .root_finder import Newton, _solver_name
 from .crank_nicolson import CrankNicolson
 from .substeps import Substeps
@@ -132,7 +132,7 @@ def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") 
     not finite."""
     name = scheme.name
     span = f"from t={t0:.6g} to t={t1:.6g}{where}"
-    if isinstance(scheme, _AbstractImplicit):
+    if isinstance(scheme, AbstractImplicitScheme):
         solver = _solver_name(scheme.root_finder)
         newton = ("" if isinstance(scheme.root_finder, Newton)
                   else "the Newton solver (--solver newton), ")

@@ -364,9 +364,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     summary = {k: v for k, v in metrics.items() if not isinstance(v, (list, dict))}
     if "verdict" in metrics:
         summary["verdict"] = metrics["verdict"]["outcome"]
-    from ..io._files import _strict
+    from ..io._files import json_safe
 
-    print(json.dumps(_strict(summary), indent=2, default=str))
+    print(json.dumps(json_safe(summary), indent=2, default=str))
     if args.strict:
         from ..verdict import EXIT_STATUS
 

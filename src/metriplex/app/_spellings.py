@@ -16,7 +16,7 @@ import jax
 
 from .._errors import MetriplexError
 from ..io import read_matrix
-from ..structure import _registry
+from ..structure._registry import from_spec
 from ..structure.confinement import Confinement
 from ..structure.constant import ConstantFriction, ConstantPoisson
 from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
@@ -119,7 +119,7 @@ def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
             # a(x) J of one sign: E, always learned on the command line, takes the sign.
             chosen = "planar"
         spec = {"kind": chosen, **b.net, "scaling": b.scaling.to_json()}
-        return _registry.from_spec("poisson", spec, b.n, key=b.key)
+        return from_spec("poisson", spec, b.n, key=b.key)
 
     return make
 

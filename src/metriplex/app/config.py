@@ -15,8 +15,7 @@ import math
 from typing import Any
 
 from .._errors import MetriplexError, expect_integer
-from .._solve._implicit import _AbstractImplicit
-from ..integrate import ROOT_FINDERS, SCHEMES, AbstractScheme
+from ..integrate import ROOT_FINDERS, SCHEMES, AbstractImplicitScheme, AbstractScheme
 from ..structure import ACTIVATION, ACTIVATIONS
 from ..structure.potential import FeatureMap
 
@@ -154,8 +153,9 @@ def scheme_from_name(name: str, *, solver: str | None = None) -> AbstractScheme:
     cls = SCHEMES[name]
     if solver is None:
         return cls()
-    if not issubclass(cls, _AbstractImplicit):
-        implicit = ", ".join(k for k, c in SCHEMES.items() if issubclass(c, _AbstractImplicit))
+    if not issubclass(cls, AbstractImplicitScheme):
+        implicit = ", ".join(k for k, c in SCHEMES.items()
+                             if issubclass(c, AbstractImplicitScheme))
         raise MetriplexError(
             f"--solver applies to the implicit schemes ({implicit}); "
             f"{name!r} is explicit. Leave --solver out."

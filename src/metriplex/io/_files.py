@@ -58,17 +58,19 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Strict JSON (what every reader accepts): a NaN or infinite number is written as ``null``;
     the file that holds it says why (e.g. ``rollout_failures`` beside a null error)."""
     with atomic_write(path, "w") as f:
-        json.dump(_strict(obj), f, indent=2, default=_json_default, allow_nan=False)
+        json.dump(json_safe(obj), f, indent=2, default=_json_default, allow_nan=False)
         f.write("\n")
 
 
-def _strict(o):
+def json_safe(o: Any) -> Any:
+    """``o`` with arrays as lists and every NaN or infinite number as ``None``: what strict
+    JSON (``allow_nan=False``) can hold, the same for files and printed summaries."""
     if isinstance(o, dict):
-        return {k: _strict(v) for k, v in o.items()}
+        return {k: json_safe(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_strict(v) for v in o]
+        return [json_safe(v) for v in o]
     if isinstance(o, (np.ndarray, jax.Array)):
-        return _strict(np.asarray(o).tolist())
+        return json_safe(np.asarray(o).tolist())
     if isinstance(o, (float, np.floating)) and not np.isfinite(o):
         return None
     return o
