@@ -46,10 +46,9 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)  # ground truth in float64; training stays float32
 
-import numpy as np  # noqa: E402
-
 import jax.numpy as jnp  # noqa: E402
 import jax.random as jr  # noqa: E402
+import numpy as np  # noqa: E402
 
 from metriplex.config import RunConfig, reversible_first_on  # noqa: E402
 from metriplex.data import state_scale, time_scale  # noqa: E402
@@ -126,7 +125,7 @@ def black_box(train, test, config: RunConfig) -> dict:
                         key=jr.key(config.seed))
     scheme = scheme_from_name(config.scheme)
     t0 = time.perf_counter()
-    box, history = fit(box, train, loss=None, scale=rate, dtype=dtype, seed_split=config.seed,
+    box, history = fit(box, train, scale=rate, dtype=dtype, seed_split=config.seed,
                        progress=False, key=jr.key(config.seed + 1))
     seconds = time.perf_counter() - t0
     error, _ = standardised_error(box, test, scheme)

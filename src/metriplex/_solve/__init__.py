@@ -46,8 +46,8 @@ from .root_finder import (
 from ._implicit import AbstractImplicitScheme
 from ._scheme import AbstractScheme
 
-__all__ = ["RK4", "ROOT_FINDERS", "AbstractImplicitScheme", "AbstractRootFinder", "AbstractScheme",
-           "CrankNicolson",
-           "DiscreteGradient", "FixedPoint", "FixedPointThenNewton", "ImplicitMidpoint", "Newton",
-           "Rollout", "discrete_generic_field", "discrete_gradient", "model_size", "project_out",
-           "simulate", "solve", "step_failure"]
+__all__ = ["RK4", "ROOT_FINDERS", "AbstractImplicitScheme", "AbstractRootFinder",
+           "AbstractScheme", "CrankNicolson", "DiscreteGradient", "FixedPoint",
+           "FixedPointThenNewton", "ImplicitMidpoint", "Newton", "Rollout",
+           "discrete_generic_field", "discrete_gradient", "model_size", "project_out", "simulate",
+           "solve", "step_failure"]
