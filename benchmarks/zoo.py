@@ -21,8 +21,8 @@ python benchmarks/zoo.py --black-box             # also an unconstrained field, 
 
 ``--black-box`` also trains, on the same training data and split, an unconstrained vector field
 (:class:`metriplex.verdict.BlackBoxModel`, an MLP of the same width and depth as the GENERIC
-model's networks, ``fit``'s defaults, the same scheme's residual) and adds its standardised error and failed
-rollouts as a column: where it beats the GENERIC model, the structure (or how it is learned)
+model's networks, ``fit``'s defaults, the same scheme's residual) and adds its standardised
+error and failed rollouts as a column: where it beats the GENERIC model, the structure (or how it is learned)
 costs accuracy on that case; where both miss, the data are the limit.
 
 Cases marked ``held_out`` were not used to choose the defaults (``--tuning`` runs only the
@@ -131,8 +131,9 @@ def black_box(train, test, config: RunConfig) -> dict:
                        seed_split=config.seed, scale=rate, dtype=dtype, progress=False,
                        key=jr.key(config.seed + 1))
     seconds = time.perf_counter() - t0
-    error, _ = standardised_error(box, test, scheme)
-    report = evaluate(box, test, scheme=scheme)
+    rollout = rollout_data(box, test, scheme=scheme)
+    error, _ = standardised_error(box, test, scheme, rollout)
+    report = evaluate(box, test, scheme=scheme, rollout=rollout)
     return {"standardised": error, "rel_l2": report["rollout_error_mean"],
             "failed": int(report["rollout_failures"]),
             "steps": history.step[-1] if history.step else 0, "seconds": seconds}
@@ -152,8 +153,8 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
     model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
                                               progress=False)
     scheme = scheme_from_name(config.scheme)
-    report = evaluate(model, test, scheme=scheme)
     rollout = rollout_data(model, test, scheme=scheme)
+    report = evaluate(model, test, scheme=scheme, rollout=rollout)
     std_mean, _ = standardised_error(model, test, scheme, rollout)
     drift = constant_drift(test, rollout)
     truth = evaluate(system.model, test, scheme=scheme_from_name("cn"))
