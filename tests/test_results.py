@@ -62,6 +62,35 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                              "above), both in 5.0 s")
 
 
+def test_train_summary_says_when_the_model_kept_is_barely_trained():
+    # Found on a stand-in of a published dataset: the model of step 700 of 13 800 was kept,
+    # every later one rolled out the held-out trajectories 10-50x worse, and its error (0.6,
+    # better than x(t) = x(0)) came from a model that barely moves.
+    metrics = {"trajectories": 8, "rollout_failures": 0, "rollout_error_mean": 0.6,
+               "evaluated_on": "validation trajectories"}
+    steps = list(range(0, 13_801, 100))
+
+    def history(best, scores):
+        return History(step=steps, rollout=scores, best_step=best, best_rollout=1.5,
+                       converged=True, stopped="converged at step 13800")
+
+    lost = [1.6] * 7 + [1.5] + [62.0] * (len(steps) - 8)
+    line = _train_summary(history(700, lost), metrics, 40.0, Path("run"))
+    assert "the model of step 700 of 13800 was kept" in line
+    assert "median score 62 against 1.5" in line and "barely trained" in line
+    staged = _train_summary(history(700, lost), metrics, 40.0, Path("run"), first_stage=True)
+    assert "the main stage's model of step 700 of 13800 was kept" in staged
+    assert "friction added to the first stage's model is barely trained" in staged
+    # Not said where the later models roll out about as well (a plateau after an early best),
+    # where the best came late, or where no rollouts were scored.
+    flat = [1.6] * 7 + [1.5] + [2.9] * (len(steps) - 8)
+    assert "barely trained" not in _train_summary(history(700, flat), metrics, 40.0, Path("run"))
+    late = _train_summary(history(5000, lost), metrics, 40.0, Path("run"))
+    assert "barely trained" not in late
+    bare = History(step=steps, best_step=700, converged=True, stopped="converged")
+    assert "barely trained" not in _train_summary(bare, metrics, 40.0, Path("run"))
+
+
 def test_evaluate_reports_the_error_of_predicting_no_motion():
     # The baseline x(t) = x(0) that a model must beat, computed by hand on the same data; a
     # model with no motion at all (zero L and M) scores exactly that baseline, and the first

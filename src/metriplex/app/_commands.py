@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import gc
 import math
+import statistics
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -111,6 +112,9 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path, *,
                       "dynamics away from the training trajectories (give more trajectories or "
                       "more of the structure), or training ended in a poor fit (try another "
                       "--seed)")
+    early = _kept_early(history, first_stage)
+    if early:
+        ended += early
     k = metrics.get("trajectories", 0)
     failed = metrics.get("rollout_failures", 0)
     err = metrics.get("rollout_error_mean")
@@ -128,6 +132,34 @@ def _train_summary(history, metrics: dict, seconds: float, out: Path, *,
     steps = (f"{last} steps after the first stage's (L grad E alone, above), both in"
              if first_stage else f"{last} steps in")
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
+
+
+def _kept_early(history, first_stage: bool) -> str:
+    """A clause for train's line where the model kept is an early one that the later models
+    lost to: kept within the first tenth of the steps, and the later evaluations' held-out
+    rollout scores at a median of more than twice its own. Its error can then look fair (a
+    model that barely moves stays near the data) while it has hardly learned the dynamics.
+    After a first stage, the main stage's early model is the first stage's, trained, plus a
+    little friction: the clause says that instead."""
+    best, last = history.best_step, history.step[-1] if history.step else 0
+    if not (0 < best <= last / 10) or len(history.rollout) != len(history.step):
+        return ""
+    later = [r if math.isfinite(r) else math.inf
+             for s, r in zip(history.step, history.rollout) if s > best]
+    if not later or not math.isfinite(history.best_rollout) or history.best_rollout <= 0:
+        return ""
+    median = statistics.median(later)
+    if median <= 2.0 * history.best_rollout:
+        return ""
+    worse = (f"the later ones rolled out the held-out trajectories worse (median score "
+             f"{median:.3g} against {history.best_rollout:.3g})")
+    if first_stage:
+        return (f"; the main stage's model of step {best} of {last} was kept: {worse}, so the "
+                "friction added to the first stage's model is barely trained")
+    return (f"; the model of step {best} of {last} was kept: {worse}, so it is barely trained "
+            "and its error below says little about the dynamics: the data may not determine "
+            "them away from the training trajectories (give more trajectories or more of the "
+            "structure)")
 
 
 def cmd_train(args: argparse.Namespace) -> int | None:
