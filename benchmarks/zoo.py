@@ -116,14 +116,15 @@ def constant_drift(data, rollout) -> float | None:
     return worst
 
 
-def black_box(train, test, config: RunConfig) -> dict:
+def black_box(train, test, config: RunConfig, horizon: float | None = None) -> dict:
     """Standardised and plain rel. L2 and failed rollouts on ``test`` of an unconstrained field
     trained on ``train`` by ``fit`` with its defaults and, as ``config``'s GENERIC model, the
     same validation split, the residual of the same scheme, the same width, depth and
     precision (activation: softplus; input statistics and rate units from all of ``train``).
 
     A discrete-gradient step needs E, S, L and M, which a bare field has not: with that scheme
-    the black box trains and rolls out with Crank–Nicolson (``"scheme"`` of the result)."""
+    the black box trains and rolls out with Crank–Nicolson (``"scheme"`` of the result).
+    ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``)."""
     d = state_scale(train.x)
     rate = d / time_scale(train, d)
     dtype = jnp.float64 if config.float64 else jnp.float32
@@ -138,8 +139,9 @@ def black_box(train, test, config: RunConfig) -> dict:
     seconds = time.perf_counter() - t0
     rollout = rollout_data(box, test, scheme=scheme)
     error, _ = standardised_error(box, test, scheme, rollout)
-    report = evaluate(box, test, scheme=scheme, rollout=rollout)
+    report = evaluate(box, test, scheme=scheme, rollout=rollout, horizon=horizon)
     return {"standardised": error, "rel_l2": report["rollout_error_mean"],
+            "to_horizon": report.get("rollout_error_to_horizon_mean"),
             "failed": int(report["rollout_failures"]), "scheme": name,
             "steps": history.step[-1] if history.step else 0, "seconds": seconds}
 
