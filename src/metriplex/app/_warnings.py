@@ -1,6 +1,7 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
 that does not beat predicting no motion, learned temperatures that are negative, a learned
-energy that does not drive the motion, and a learned entropy that decreases."""
+entropy that rises far more than the data's, a learned energy that does not drive the motion,
+and a learned entropy that decreases."""
 
 from __future__ import annotations
 
@@ -73,11 +74,31 @@ def _idle_friction(share: float | None) -> str:
             "dynamics; if it dissipates, the friction was not learned.")
 
 
+#: Above this excess of the entropy's rise along the rollouts over its rise along the data, in
+#: units of its spread over the data's states (``entropy_rise_over_data_spread``), train and
+#: evaluate warn. Not a check of the verdict: a GENERIC model can make too much entropy.
+ENTROPY_RISE = 1.0
+
+
+def entropy_rise_warning(metrics: dict) -> list[str]:
+    """A warning where the model's entropy outruns the data's along the rollouts: each entropy
+    variable's rate can fit the data while their sum, the entropy production, is far too
+    large, and S only grows, so the error adds up."""
+    rise = metrics.get("entropy_rise_over_data_spread")
+    if rise is None or rise <= ENTROPY_RISE:
+        return []
+    return [f"warning: along the rollouts the learned entropy rises {rise:.3g} times its spread "
+            "over the data's states more than it does along the data: the model makes entropy "
+            "that the data do not show, and through the temperatures the states drift with it. "
+            "Where M is known, give it (--friction file:M.npy); otherwise more trajectories "
+            "may help."]
+
+
 def structure_warnings(metrics: dict) -> list[str]:
     """Every warning on what the learned structure means: :func:`temperature_warnings`, a
     learned energy that drives almost none of the motion (friction carries it), and a learned
     entropy that the model's own flow decreases (L grad S = 0 only as a penalty)."""
-    out = temperature_warnings(metrics)
+    out = temperature_warnings(metrics) + entropy_rise_warning(metrics)
     negative = metrics.get("entropy_production_negative_fraction")
     if negative is not None and negative > NEGATIVE_PRODUCTION:
         residual = metrics.get("degeneracy_L_gradS_relative")
