@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from metriplex.app._commands import _train_summary
+from metriplex.app._summary import train_summary
 from metriplex.io import write_json
 from metriplex.train import History
 
@@ -29,13 +29,13 @@ def _history(best_step, last, converged, stopped):
 def test_train_summary_counts_failed_rollouts_and_says_when_nothing_was_learned():
     metrics = {"trajectories": 10, "rollout_failures": 4, "rollout_error_mean": float("inf"),
                "rollout_error_mean_completed": 0.05, "evaluated_on": "validation trajectories"}
-    line = _train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
+    line = train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
                           Path("run"))
     assert "4 of 10 rollouts on validation trajectories FAILED" in line
     assert "error of the 6 completed: 5.000e-02" in line
     assert "NO trained model rolled out the held-out trajectories better than the untrained" in line
     assert "another --seed" in line and "--no-reversible-first" not in line
-    staged = _train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
+    staged = train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
                             Path("run"), first_stage=True)
     # After a first stage, step 0 of the main stage is the first stage's trained model: the
     # line does not call it untrained, and names the stall as the cause to rule out.
@@ -47,16 +47,16 @@ def test_train_summary_counts_failed_rollouts_and_says_when_nothing_was_learned(
 def test_train_summary_says_when_the_budget_ended_training_before_convergence():
     metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 0.01,
                "evaluated_on": "validation trajectories"}
-    line = _train_summary(_history(3000, 3000, False, "step budget reached (3000 steps)"),
+    line = train_summary(_history(3000, 3000, False, "step budget reached (3000 steps)"),
                           metrics, 5.0, Path("run"))
     assert "not converged, allow more --steps" in line
     assert "rollout error on validation trajectories: 1.000e-02" in line
-    done = _train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
+    done = train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                           Path("run"))
     assert "not converged" not in done and "FAILED" not in done and "NO trained" not in done
     # After a first stage the count is the main stage's, and the line says so.
     assert done.startswith("trained 3000 steps in 5.0 s")
-    staged = _train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
+    staged = train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                             Path("run"), first_stage=True)
     assert staged.startswith("trained 3000 steps after the first stage's (L grad E alone, "
                              "above), both in 5.0 s")
@@ -75,20 +75,20 @@ def test_train_summary_says_when_the_model_kept_is_barely_trained():
                        converged=True, stopped="converged at step 13800")
 
     lost = [1.6] * 7 + [1.5] + [62.0] * (len(steps) - 8)
-    line = _train_summary(history(700, lost), metrics, 40.0, Path("run"))
+    line = train_summary(history(700, lost), metrics, 40.0, Path("run"))
     assert "the model of step 700 of 13800 was kept" in line
     assert "median score 62 against 1.5" in line and "barely trained" in line
-    staged = _train_summary(history(700, lost), metrics, 40.0, Path("run"), first_stage=True)
+    staged = train_summary(history(700, lost), metrics, 40.0, Path("run"), first_stage=True)
     assert "the main stage's model of step 700 of 13800 was kept" in staged
     assert "friction added to the first stage's model is barely trained" in staged
     # Not said where the later models roll out about as well (a plateau after an early best),
     # where the best came late, or where no rollouts were scored.
     flat = [1.6] * 7 + [1.5] + [2.9] * (len(steps) - 8)
-    assert "barely trained" not in _train_summary(history(700, flat), metrics, 40.0, Path("run"))
-    late = _train_summary(history(5000, lost), metrics, 40.0, Path("run"))
+    assert "barely trained" not in train_summary(history(700, flat), metrics, 40.0, Path("run"))
+    late = train_summary(history(5000, lost), metrics, 40.0, Path("run"))
     assert "barely trained" not in late
     bare = History(step=steps, best_step=700, converged=True, stopped="converged")
-    assert "barely trained" not in _train_summary(bare, metrics, 40.0, Path("run"))
+    assert "barely trained" not in train_summary(bare, metrics, 40.0, Path("run"))
 
 
 def test_evaluate_reports_the_error_of_predicting_no_motion():
@@ -117,10 +117,10 @@ def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
                "constant_prediction_error_mean_completed": 0.8,
                "evaluated_on": "validation trajectories"}
     history = _history(3000, 4000, True, "converged at step 4000")
-    line = _train_summary(history, metrics, 5.0, Path("run"))
+    line = train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better than predicting x(t) = x(0) (8.000e-01)" in line
     metrics.update(rollout_error_mean=0.02, rollout_error_mean_completed=0.02)
-    line = _train_summary(history, metrics, 5.0, Path("run"))
+    line = train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better" not in line and "predicting x(t) = x(0) gives 8.000e-01" in line
 
 

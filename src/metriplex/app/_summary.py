@@ -1,0 +1,80 @@
+"""train's final line: how training ended, and how the held-out rollouts went."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from pathlib import Path
+
+from ._warnings import against_constant
+
+
+def train_summary(history, metrics: dict, seconds: float, out: Path, *,
+                   first_stage: bool = False) -> str:
+    """train's final line: how training ended, and how the held-out rollouts went.
+    ``first_stage``: a first stage ran before the main one (``--reversible-first``); its steps
+    are on the line it printed, and ``seconds`` counts both."""
+    last = history.step[-1] if history.step else 0
+    ended = history.stopped or "completed"
+    if not history.converged and history.best_step == last and last > 0:
+        ended += "; the best model is the last one: not converged, allow more --steps"
+    if history.best_step == 0 and last > 0:
+        if first_stage:  # the main stage starts from the first stage's E and L: a trained model
+            ended += ("; the main stage's start (the first stage's model with an untrained "
+                      "friction) rolled out the held-out trajectories best (kept); if its "
+                      "error below is poor, the first stage can have stalled: try another "
+                      "--seed, or --no-reversible-first")
+        else:
+            ended += ("; NO trained model rolled out the held-out trajectories better than "
+                      "the untrained one (kept): either the data do not determine the "
+                      "dynamics away from the training trajectories (give more trajectories or "
+                      "more of the structure), or training ended in a poor fit (try another "
+                      "--seed)")
+    early = kept_early(history, first_stage)
+    if early:
+        ended += early
+    k = metrics.get("trajectories", 0)
+    failed = metrics.get("rollout_failures", 0)
+    err = metrics.get("rollout_error_mean")
+    where = metrics.get("evaluated_on", "")
+    if failed:
+        rollouts = f"{failed} of {k} rollouts on {where} FAILED (blew up or did not converge)"
+        done = metrics.get("rollout_error_mean_completed")
+        if done is not None:
+            rollouts += f"; error of the {k - failed} completed: {done:.3e}"
+    else:
+        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
+    against, _ = against_constant(metrics)
+    if against:
+        rollouts += f"; {against}"
+    steps = (f"{last} steps after the first stage's (L grad E alone, above), both in"
+             if first_stage else f"{last} steps in")
+    return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
+
+
+def kept_early(history, first_stage: bool) -> str:
+    """A clause for train's line where the model kept is an early one that the later models
+    lost to: kept within the first tenth of the steps, and the later evaluations' held-out
+    rollout scores at a median of more than twice its own. Its error can then look fair (a
+    model that barely moves stays near the data) while it has hardly learned the dynamics.
+    After a first stage, the main stage's early model is the first stage's, trained, plus a
+    little friction: the clause says that instead."""
+    best, last = history.best_step, history.step[-1] if history.step else 0
+    if not (0 < best <= last / 10) or len(history.rollout) != len(history.step):
+        return ""
+    later = [r if math.isfinite(r) else math.inf
+             for s, r in zip(history.step, history.rollout) if s > best]
+    if not later or not math.isfinite(history.best_rollout) or history.best_rollout <= 0:
+        return ""
+    median = statistics.median(later)
+    if median <= 2.0 * history.best_rollout:
+        return ""
+    worse = (f"the later ones rolled out the held-out trajectories worse (median score "
+             f"{median:.3g} against {history.best_rollout:.3g})")
+    if first_stage:
+        return (f"; the main stage's model of step {best} of {last} was kept: {worse}, so the "
+                "friction added to the first stage's model is barely trained")
+    return (f"; the model of step {best} of {last} was kept: {worse}, so it is barely trained "
+            "and its error below says little about the dynamics: the data may not determine "
+            "them away from the training trajectories (give more trajectories or more of the "
+            "structure)")
