@@ -290,7 +290,7 @@ def test_a_model_that_makes_more_entropy_than_the_data_show_is_warned_about():
     # Found on a published-data stand-in: each entropy variable's rate fitted, their sum (the
     # production) 1000x the data's, and the rollouts' entropy rose 17 spreads beyond the data's.
     # Here the damped oscillator in a bath, data with friction 0.01 from s = 0, rolled out by
-    # the same model with friction 0.03 (3x the entropy) and 1.0.
+    # the same model with friction 0.03 (3x the entropy).
     import metriplex as mx
     from helpers import damped_oscillator, make_data
     from metriplex.app._warnings import structure_warnings
@@ -300,13 +300,9 @@ def test_a_model_that_makes_more_entropy_than_the_data_show_is_warned_about():
     true = mx.evaluate(damped_oscillator(0.01), data, step_check=False)
     assert abs(true["entropy_rise_over_data_spread"]) < 1e-9
     assert not [w for w in structure_warnings(true) if "makes entropy" in w]
-    rises, errors = [], []
-    for kappa in (0.03, 1.0):
-        r = mx.evaluate(damped_oscillator(kappa), data, step_check=False)
-        rises.append(r["entropy_rise_over_data_spread"])
-        errors.append(r["rollout_error_mean"])
-        (line,) = [w for w in structure_warnings(r) if "makes entropy" in w]
-        assert f"rises {rises[-1]:.3g} times its spread" in line and "--friction file:" in line
+    r = mx.evaluate(damped_oscillator(0.03), data, step_check=False)
+    (line,) = [w for w in structure_warnings(r) if "makes entropy" in w]
+    rise = r["entropy_rise_over_data_spread"]
+    assert f"rises {rise:.3g} times its spread" in line and "--friction file:" in line
     # 3x the friction: the error still looks fair (under 10 %), the entropy does not.
-    assert 1.0 < rises[0] < rises[1]
-    assert errors[0] < 0.1 < 0.5 < errors[1]
+    assert rise > 1.0 and r["rollout_error_mean"] < 0.1

@@ -5,11 +5,15 @@ from __future__ import annotations
 import math
 import statistics
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ._warnings import against_constant
 
+if TYPE_CHECKING:
+    from ..train import History
 
-def train_summary(history, metrics: dict, seconds: float, out: Path, *,
+
+def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
                    first_stage: bool = False) -> str:
     """train's final line: how training ended, and how the held-out rollouts went.
     ``first_stage``: a first stage ran before the main one (``--reversible-first``); its steps
@@ -52,7 +56,7 @@ def train_summary(history, metrics: dict, seconds: float, out: Path, *,
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
-def kept_early(history, first_stage: bool) -> str:
+def kept_early(history: History, first_stage: bool) -> str:
     """A clause for train's line where the model kept is an early one that the later models
     lost to: kept within the first tenth of the steps, and the later evaluations' held-out
     rollout scores at a median of more than twice its own. Its error can then look fair (a
