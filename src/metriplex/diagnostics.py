@@ -31,6 +31,7 @@ import numpy as np
 from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
 # The residuals at given states (no rollout; every rollout is here), public from here.
+from ._entropy_rise import entropy_rise
 from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
@@ -167,10 +168,7 @@ def evaluate(
     S = potential_along(model, model.entropy, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac, along = [], [], [], [], []
     E_data = potential_along(model, model.energy, xs)
-    S_data = potential_along(model, model.entropy, xs)
     spread = float(np.ptp(np.concatenate([E_data[k, :T] for k, T in enumerate(lengths)])))
-    spread_S = float(np.ptp(np.concatenate([S_data[k, :T] for k, T in enumerate(lengths)])))
-    rise = []  # the model's entropy change beyond the data's, per rollout
     for k, T in enumerate(lengths):
         if failed[k] >= 0:
             T = min(int(failed[k]), int(T))
@@ -183,7 +181,6 @@ def evaluate(
         drifts_gauge.append(d / max(spread, _TINY))
         ds = np.diff(s)
         dS_min.append(float(ds.min()))
-        rise.append(float((s[-1] - s[0]) - (S_data[k, T - 1] - S_data[k, 0])))
         neg_frac.append(float(np.mean(ds < -1e-12 * max(1.0, float(np.abs(s).max())))))
     null_reasons: dict[str, str] = {}
     failures = f"{n_failed} of {len(lengths)} rollouts failed"
@@ -232,9 +229,8 @@ def evaluate(
                                                 "entropy_negative_step_fraction", no_steps),
         # How much more the entropy rises along the rollouts than along the data (mean over
         # them, up to any failure), in units of its spread over the data's states.
-        "entropy_rise_over_data_spread": known(
-            float(np.mean(rise)) / max(spread_S, _TINY) if rise else None,
-            "entropy_rise_over_data_spread", no_steps),
+        "entropy_rise_over_data_spread": entropy_rise(
+            S, potential_along(model, model.entropy, xs), lengths, failed, null_reasons),
         # At the states of the rollouts up to any failure; null when none ran two steps.
         "entropy_production_negative_fraction": known(
             entropy_production_negative_fraction(model, np.concatenate(along),

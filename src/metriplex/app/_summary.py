@@ -62,9 +62,10 @@ def kept_early(history: History, first_stage: bool) -> str:
     rollout scores at a median of more than twice its own. Its error can then look fair (a
     model that barely moves stays near the data) while it has hardly learned the dynamics.
     After a first stage, the main stage's early model is the first stage's, trained, plus a
-    little friction: the clause says that instead."""
+    little friction: the clause says that instead. The scores are read as far as both lists
+    go (after a divergence the steps have one more entry than the scores)."""
     best, last = history.best_step, history.step[-1] if history.step else 0
-    if not (0 < best <= last / 10) or len(history.rollout) != len(history.step):
+    if not (0 < best <= last / 10) or not history.rollout:
         return ""
     later = [r if math.isfinite(r) else math.inf
              for s, r in zip(history.step, history.rollout) if s > best]
@@ -77,8 +78,8 @@ def kept_early(history: History, first_stage: bool) -> str:
              f"{median:.3g} against {history.best_rollout:.3g})")
     if first_stage:
         return (f"; the main stage's model of step {best} of {last} was kept: {worse}, so the "
-                "friction added to the first stage's model is barely trained")
-    return (f"; the model of step {best} of {last} was kept: {worse}, so it is barely trained "
-            "and its error below says little about the dynamics: the data may not determine "
-            "them away from the training trajectories (give more trajectories or more of the "
-            "structure)")
+                "friction added to the first stage's model may be barely trained")
+    return (f"; the model of step {best} of {last} was kept: {worse}, so it may be barely "
+            "trained and its error below say little about the dynamics: the data may not "
+            "determine them away from the training trajectories (give more trajectories or "
+            "more of the structure), or later training degraded it (try another --seed)")

@@ -75,8 +75,11 @@ def _idle_friction(share: float | None) -> str:
 
 
 #: Above this excess of the entropy's rise along the rollouts over its rise along the data, in
-#: units of its spread over the data's states (``entropy_rise_over_data_spread``), train and
-#: evaluate warn. Not a check of the verdict: a GENERIC model can make too much entropy.
+#: units of its range over the data's states (``entropy_rise_over_data_spread``), train and
+#: evaluate warn. Not a check of the verdict: a GENERIC model can make too much entropy. True
+#: models rolled out on their own data give 2e-3 or less (zoo, reference experiments), but 0.68
+#: where Crank–Nicolson's step is coarse for stiff heat conduction (a published-pendulum
+#: stand-in at dt = 0.3): the rollout's entropy, not the field's, is judged.
 ENTROPY_RISE = 1.0
 
 
@@ -87,17 +90,19 @@ def entropy_rise_warning(metrics: dict) -> list[str]:
     rise = metrics.get("entropy_rise_over_data_spread")
     if rise is None or rise <= ENTROPY_RISE:
         return []
-    return [f"warning: along the rollouts the learned entropy rises {rise:.3g} times its spread "
-            "over the data's states more than it does along the data: the model makes entropy "
-            "that the data do not show, and through the temperatures the states drift with it. "
-            "Where M is known, give it (--friction file:M.npy); otherwise more trajectories "
-            "may help."]
+    return [f"warning: along the rollouts the learned entropy rises beyond its rise along the "
+            f"data by {rise:.3g} times its whole range over the data's states: the model makes "
+            "entropy that the data do not show (each entropy variable's rate can fit while "
+            "their sum, the entropy production, does not), and its rollouts leave the data's "
+            "range of S. Judge it over short horizons; more trajectories, or M given where it "
+            "is known (--friction file:M.npy), may help."]
 
 
 def structure_warnings(metrics: dict) -> list[str]:
-    """Every warning on what the learned structure means: :func:`temperature_warnings`, a
-    learned energy that drives almost none of the motion (friction carries it), and a learned
-    entropy that the model's own flow decreases (L grad S = 0 only as a penalty)."""
+    """Every warning on what the learned structure means: :func:`temperature_warnings`,
+    :func:`entropy_rise_warning`, a learned energy that drives almost none of the motion
+    (friction carries it), and a learned entropy that the model's own flow decreases (L grad
+    S = 0 only as a penalty)."""
     out = temperature_warnings(metrics) + entropy_rise_warning(metrics)
     negative = metrics.get("entropy_production_negative_fraction")
     if negative is not None and negative > NEGATIVE_PRODUCTION:
