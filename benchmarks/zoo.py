@@ -182,6 +182,8 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "reversible_share": report["reversible_share"],
         "true_reversible_share": truth["reversible_share"],
         "constant_drift": drift,
+        # Above 1, train and evaluate warn: the rollouts make entropy the data do not show.
+        "entropy_rise": report.get("entropy_rise_over_data_spread"),
         "train_seconds": seconds,
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
