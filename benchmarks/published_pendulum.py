@@ -83,6 +83,8 @@ def file_flags(folder: Path) -> dict:
     np.save(folder / "M.npy", M)
     return {"poisson": f"file:{folder / 'L.npy'}", "friction": f"file:{folder / 'M.npy'}",
             "entropy": "neural"}
+
+
 # Over 60 time units the stand-ins' rel. L2 mostly rewards a model that stays bounded near the
 # data (x(t) = x(0) reaches ~1.1, an almost untrained model ~0.6); the error up to t = 3 (ten
 # steps) tells whether a model follows the dynamics at all.

@@ -30,8 +30,8 @@ import numpy as np
 
 from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
-# The residuals at given states (no rollout; every rollout is here), public from here.
 from ._entropy_rise import entropy_rise
+# The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS

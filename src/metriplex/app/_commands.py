@@ -139,7 +139,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
-                         first_stage=reversible_first_on(config) and not args.resume))
+                        first_stage=reversible_first_on(config) and not args.resume))
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):

@@ -14,7 +14,7 @@ if TYPE_CHECKING:
 
 
 def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
-                   first_stage: bool = False) -> str:
+                  first_stage: bool = False) -> str:
     """train's final line: how training ended, and how the held-out rollouts went.
     ``first_stage``: a first stage ran before the main one (``--reversible-first``); its steps
     are on the line it printed, and ``seconds`` counts both."""
@@ -80,6 +80,6 @@ def kept_early(history: History, first_stage: bool) -> str:
         return (f"; the main stage's model of step {best} of {last} was kept: {worse}, so the "
                 "friction added to the first stage's model may be barely trained")
     return (f"; the model of step {best} of {last} was kept: {worse}, so it may be barely "
-            "trained and its error below say little about the dynamics: the data may not "
+            "trained and its error below says little about the dynamics: the data may not "
             "determine them away from the training trajectories (give more trajectories or "
             "more of the structure), or later training degraded it (try another --seed)")
