@@ -16,7 +16,7 @@ What is measured, and how:
   option at its default: ``RunConfig`` (E, S, L, M all networks of width 64 x 2, the
   Crank-Nicolson residual, both degeneracy penalties, ``--jacobi`` with 1 probe), made by
   ``_build.units_for`` / ``build_model`` / ``build_loss`` in the data's units, float32, and fit's
-  optimiser under the default plateau schedule (``_train.adjustable_optimizer``).
+  optimiser under the default plateau schedule (``_optimizers.adjustable_optimizer``).
 - **step**: ``metriplex._train.make_chunk``, the compiled unit that ``metriplex.fit`` runs
   (random minibatch, ``value_and_grad`` of the loss, Adam; ``length`` steps per ``lax.scan``), as
   ``benchmarks/run.py`` times it. Two chunk lengths are compiled (``--short`` steps, and
@@ -75,7 +75,8 @@ jax.config.update("jax_enable_x64", False)
 from metriplex.app._build import build_loss, build_model, units_for  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex._pairs import PairRows, PairStore  # noqa: E402
-from metriplex._train import adjustable_optimizer, make_chunk  # noqa: E402
+from metriplex._optimizers import adjustable_optimizer  # noqa: E402
+from metriplex._train import make_chunk  # noqa: E402
 from metriplex.config import RunConfig  # noqa: E402
 from metriplex.structure._mlp import lower_assembly, signed_rows, skew_assembly  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402

@@ -172,7 +172,8 @@ from metriplex.io import read, write  # noqa: E402
 from metriplex.losses import Batch, NegativeTemperature  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex._pairs import PairRows, PairStore  # noqa: E402
-from metriplex._train import adjustable_optimizer, make_chunk  # noqa: E402
+from metriplex._optimizers import adjustable_optimizer  # noqa: E402
+from metriplex._train import make_chunk  # noqa: E402
 from metriplex.structure.poisson import CanonicalPoisson, SkewMLPPoisson  # noqa: E402
 from metriplex.structure.potential import MLPPotential, SumOf  # noqa: E402
 from metriplex.structure.friction import (  # noqa: E402
@@ -414,7 +415,7 @@ class PlainStep:
 
 class FitChunk:
     """metriplex's own compiled step in this process (a diagnostic beside the CLI): the chunk
-    that ``fit`` runs (``make_chunk``: ``length`` steps in one ``lax.scan``), with fit's
+    that ``fit`` runs (``make_chunk``: ``length`` steps in one compiled loop), with fit's
     optimiser, on the same pairs, for the same model and loss."""
 
     def __init__(self, model, loss, pairs, rate, batch: int, lr: float, length: int = 10,

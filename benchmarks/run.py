@@ -74,7 +74,8 @@ from metriplex.data import state_scale  # noqa: E402
 from metriplex._model import with_dtype  # noqa: E402
 from metriplex.systems import generate, get_system  # noqa: E402
 from metriplex._pairs import PairRows, PairStore  # noqa: E402
-from metriplex._train import default_optimizer, make_chunk  # noqa: E402
+from metriplex._optimizers import default_optimizer  # noqa: E402
+from metriplex._train import make_chunk  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN = "<!-- benchmarks/run.py: generated results begin -->"

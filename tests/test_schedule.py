@@ -53,8 +53,8 @@ def test_the_default_optimiser_state_lets_the_plateau_cut_the_rate():
     # The plateau schedule cuts the learning rate through the injected hyperparameter; an
     # optimiser state it cannot read stops training at the first plateau, uncut (a change to
     # how the state was recognised once did that silently: "after 0 learning-rate cuts").
-    from metriplex._train import adjustable_optimizer, is_adjustable, learning_rate_of
-    from metriplex._train import with_learning_rate
+    from metriplex._optimizers import adjustable_optimizer, is_adjustable, learning_rate_of
+    from metriplex._optimizers import with_learning_rate
 
     state = adjustable_optimizer(1e-2).init({"w": jnp.zeros(3)})
     assert is_adjustable(state)

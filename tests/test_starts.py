@@ -2,7 +2,9 @@
 
 import dataclasses
 import json
+import logging
 
+import jax
 import jax.random as jr
 import pytest
 
@@ -75,16 +77,24 @@ def test_best_start_goes_on_from_the_start_of_lowest_validation_loss(monkeypatch
     assert not calls and not capsys.readouterr().err
 
 
-def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys):
+def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys, caplog):
     data = generate("rigid-body", trajectories=4, steps=30, seed=0)
     config = RunConfig(entropy="zero", friction="zero", steps=200, eval_every=50,
                        average_steps=0, validation=0.25, starts=2)
-    train_run(data, config, tmp_path / "run", progress=False)
+    with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
+        train_run(data, config, tmp_path / "run", progress=False)
     # Each start trains a tenth of --steps at most (20 here, 1000 by default).
     err = capsys.readouterr().err
     assert "starts: initialisation" in err and "after 20 steps each" in err
     header = json.loads((tmp_path / "run" / "config.json").read_text())
     assert header["decided"]["starts"] == 2
+    # The starts' trials (20 steps each, on their cosine schedule) share one compiled chunk,
+    # and the training of the chosen start (chunks of 50) another: the chunk's length is
+    # traced and the optimisers are memoised. The pair losses compile once per subset shape.
+    compiled = [r.getMessage().split(" with ")[0] for r in caplog.records
+                if r.getMessage().startswith("Compiling jit(")]
+    assert compiled.count("Compiling jit(_chunk)") == 2, compiled
+    assert compiled.count("Compiling jit(_evaluate)") == 2, compiled
 
 
 def test_the_starts_share_the_stage_wall_time_cap(monkeypatch):

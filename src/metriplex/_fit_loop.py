@@ -20,15 +20,8 @@ import jax.random as jr
 
 from ._errors import TrainingDiverged
 from ._interrupt import CtrlC
-from ._train import (
-    History,
-    TrainState,
-    annealing,
-    learning_rate_of,
-    make_lbfgs_chunk,
-    spread,
-    with_learning_rate,
-)
+from ._optimizers import annealing, learning_rate_of, with_learning_rate
+from ._train import History, TrainState, make_lbfgs_chunk, spread
 from ._progress import progress_bar
 from ._validate import rollout_score
 
@@ -41,6 +34,13 @@ if TYPE_CHECKING:
     from ._pairs import PairStore
     from ._validate import Average, Plateau
     from .integrate import AbstractScheme
+
+
+@eqx.filter_jit
+def _evaluate(params, batch, key, loss, static):
+    """The loss on ``batch``: one compiled program for every fit of the same loss, model
+    structure and shapes (several starts, the stages)."""
+    return loss(eqx.combine(params, static), batch, key=key)
 
 
 @dataclasses.dataclass
@@ -58,18 +58,9 @@ class Evaluation:
     scheme: AbstractScheme | None = None
     state_units: np.ndarray | None = None
 
-    def __post_init__(self):
-        loss, static = self.loss, self.static
-
-        @eqx.filter_jit
-        def evaluate(params, batch, key):
-            return loss(eqx.combine(params, static), batch, key=key)
-
-        self._evaluate = evaluate
-
     def pairs(self, params: Any, batch: Batch) -> tuple[float, dict[str, float]]:
         """The loss and its terms on ``batch``, as Python floats."""
-        total, parts = self._evaluate(params, batch, self.key)
+        total, parts = _evaluate(params, batch, self.key, self.loss, self.static)
         return float(total), {k: float(v) for k, v in parts.items()}
 
     def rollouts(self, params: Any) -> tuple[float, int]:
@@ -125,7 +116,7 @@ class FitLoop:
                 state.opt_state, state.lr * annealing(state.done, anneal_from, steps))
         state.key, sub = jr.split(state.key)
         state.params, state.opt_state, value, parts = self.run_chunk(
-            state.params, state.opt_state, sub, length, self.train)
+            state.params, state.opt_state, sub, jnp.asarray(length, jnp.int32), self.train)
         state.average_params = (state.params if self.average is None else
                                 self.average.update(state.average_params, state.params, length,
                                                     steps))

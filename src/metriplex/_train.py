@@ -1,10 +1,8 @@
 r"""The training step and the training state: what :func:`~metriplex.fit` runs between two
 evaluations, and everything a checkpoint must hold to continue it.
 
-- :func:`make_chunk`: ``length`` optimiser steps on random minibatches, compiled as one
-  ``lax.scan`` (no host round-trip per step);
-- :func:`adjustable_optimizer`, :func:`learning_rate_of`, :func:`with_learning_rate`: Adam whose
-  rate the loop can change between chunks (plateau cuts, the final annealing);
+- :func:`make_chunk`: ``length`` optimiser steps on random minibatches, compiled as one loop
+  (no host round-trip per step; one program for every ``length``);
 - :class:`TrainState`: parameters, optimiser state, best and restart parameters, PRNG key and
   the loop's counters, saved and restored as one object (:meth:`TrainState.save`).
 """
@@ -12,6 +10,7 @@ evaluations, and everything a checkpoint must hold to continue it.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 from typing import TYPE_CHECKING, Any, Callable
@@ -77,86 +76,21 @@ class History:
         return cls(**{k: v for k, v in obj.items() if k in known})
 
 
-def adjustable_optimizer(learning_rate: float, warmup: int = 100,
-                         weight_decay: float = 0.0) -> optax.GradientTransformation:
-    """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
-    whose learning rate the training loop can change between chunks
-    (:func:`with_learning_rate`); ``weight_decay`` > 0 makes it AdamW (decoupled decay of every
-    weight)."""
-    return optax.chain(
-        optax.clip_by_global_norm(10.0),
-        optax.scale_by_adam(),
-        optax.add_decayed_weights(weight_decay) if weight_decay else optax.identity(),
-        optax.scale_by_schedule(
-            optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
-        ),
-        optax.inject_hyperparams(optax.scale)(step_size=-float(learning_rate)),
-    )
-
-
-def cosine_schedule(learning_rate: float, steps: int) -> optax.Schedule:
-    """A short linear warm-up, then cosine decay to 1% of the peak rate over ``steps``."""
-    return optax.warmup_cosine_decay_schedule(
-        init_value=learning_rate * 0.1,
-        peak_value=learning_rate,
-        warmup_steps=min(100, max(steps // 20, 1)),
-        decay_steps=max(steps, 2),
-        end_value=learning_rate * 1e-2,
-    )
-
-
-def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
-    """Adam on the :func:`cosine_schedule` (the optimiser of ``fit(..., stopping=None)``: a
-    fixed number of steps)."""
-    return optax.chain(optax.clip_by_global_norm(10.0),
-                       optax.adam(cosine_schedule(learning_rate, steps)))
-
-
-def annealing(step: int, start: int, end: int) -> float:
-    """The factor on the learning rate at ``step`` of a cosine annealing to 1% between
-    ``start`` and ``end`` (1 before ``start``)."""
-    frac = min(max((step - start) / max(end - start, 1), 0.0), 1.0)
-    return 0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * frac))
-
-
-def _rate_state(opt_state):
-    """The injected-hyperparameter state of :func:`adjustable_optimizer`, or ``None``."""
-    last = opt_state[-1] if isinstance(opt_state, tuple) and opt_state else None
-    # inject_hyperparams' state is InjectStatefulHyperparamsState in current Optax and
-    # InjectHyperparamsState in older ones.
-    states = (optax.InjectHyperparamsState, optax.InjectStatefulHyperparamsState)
-    if isinstance(last, states) and "step_size" in last.hyperparams:
-        return last
-    return None
-
-
-def is_adjustable(opt_state: optax.OptState) -> bool:
-    """Whether ``opt_state`` belongs to an :func:`adjustable_optimizer`."""
-    return _rate_state(opt_state) is not None
-
-
-def learning_rate_of(opt_state: optax.OptState, default: float) -> float:
-    """The current rate of an :func:`adjustable_optimizer`'s state, else ``default``."""
-    last = _rate_state(opt_state)
-    return default if last is None else -float(last.hyperparams["step_size"])
-
-
-def with_learning_rate(opt_state: optax.OptState, learning_rate: float) -> optax.OptState:
-    """``opt_state`` of :func:`adjustable_optimizer` with another learning rate."""
-    last = _rate_state(opt_state)
-    old = last.hyperparams["step_size"]
-    hyper = {**last.hyperparams, "step_size": jnp.asarray(-learning_rate, old.dtype)}
-    return (*opt_state[:-1], last._replace(hyperparams=hyper))
-
-
 def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any, batch_size: int,
                shard: Callable[[Batch], Batch] | None = None, noise: jax.Array | None = None,
-               consecutive: int = 1,
+               consecutive: int = 1, *, jit: bool = False,
                ) -> Callable[..., tuple[Any, optax.OptState, jax.Array, dict[str, jax.Array]]]:
-    """The compiled unit of training: ``chunk(params, opt_state, key, length, full_train)``
-    runs ``length`` optimiser steps in one ``lax.scan``, each on ``batch_size`` random pairs of
+    """The unit of training: ``chunk(params, opt_state, key, length, full_train)`` runs
+    ``length`` optimiser steps in one loop, each on ``batch_size`` random pairs of
     ``full_train`` (a :class:`~metriplex._pairs.PairStore` of all training pairs), and returns
-    ``(params, opt_state, mean loss, mean loss terms)``.
+    ``(params, opt_state, mean loss, mean loss terms)``. Step ``i`` draws from
+    ``jr.fold_in(key, i)``.
+
+    ``jit=True`` returns the chunk compiled by one ``eqx.filter_jit`` that every call of
+    ``make_chunk`` shares, so chunks of the same loss, optimiser, model structure and shapes
+    compile once (the trials of several starts, the stage that trains the chosen one).
+    ``length`` may be traced (an array, as ``fit`` passes it): one program then serves every
+    length (the evaluations' spacing, a shorter last chunk, the trials' steps).
 
     The training pairs are an argument, not a closed-over constant, so the data set is not
     embedded in the compiled program and the chunk can be timed on its own
@@ -171,41 +105,55 @@ def make_chunk(loss: Loss, optimizer: optax.GradientTransformation, static: Any,
     the data and the loss allow it), so that the model is evaluated at ``consecutive + 1``
     states per run instead of two per pair.
     """
+    return functools.partial(_chunk_compiled if jit else _chunk, loss=loss, optimizer=optimizer,
+                             static=static, batch_size=batch_size, shard=shard, noise=noise,
+                             consecutive=consecutive)
+
+
+def _chunk(params, opt_state, key, length, full_train, *, loss, optimizer, static, batch_size,
+           shard, noise, consecutive):
+    """:func:`make_chunk`'s chunk."""
+    n_train = full_train.first.shape[0]
+
     def loss_fn(p, batch, k):
         return loss(eqx.combine(p, static), batch, key=k)
 
-    def chunk(params, opt_state, key, length, full_train):
-        n_train = full_train.first.shape[0]
+    def one(params, opt_state, k):
+        kb, kl = jr.split(k)
+        if consecutive > 1:
+            start = jr.randint(kb, (max(1, batch_size // consecutive),), 0,
+                               full_train.x.shape[0] - 1)
+            batch = full_train.take_runs(start.astype(full_train.first.dtype), consecutive)
+        else:
+            idx = jr.randint(kb, (batch_size,), 0, n_train)
+            batch = full_train.take(idx, loss.window_shape)
+        if noise is not None:
+            kn = jr.fold_in(kl, 1)
+            eps = jr.normal(kn, batch.x0.shape, batch.x0.dtype) * noise[None, :]
+            batch = batch._replace(x0=batch.x0 + eps, x1=batch.x1 + eps)
+        if shard is not None:
+            batch = shard(batch)
+        (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
+        # Optax mixes int step counts with floats; keep it working under strict promotion.
+        with jax.numpy_dtype_promotion("standard"):
+            updates, opt_state = optimizer.update(grads, opt_state, params)
+        params = eqx.apply_updates(params, updates)
+        return params, opt_state, (value, parts)
 
-        def one(carry, k):
-            params, opt_state = carry
-            kb, kl = jr.split(k)
-            if consecutive > 1:
-                start = jr.randint(kb, (max(1, batch_size // consecutive),), 0,
-                                   full_train.x.shape[0] - 1)
-                batch = full_train.take_runs(start.astype(full_train.first.dtype), consecutive)
-            else:
-                idx = jr.randint(kb, (batch_size,), 0, n_train)
-                batch = full_train.take(idx, loss.window_shape)
-            if noise is not None:
-                kn = jr.fold_in(kl, 1)
-                eps = jr.normal(kn, batch.x0.shape, batch.x0.dtype) * noise[None, :]
-                batch = batch._replace(x0=batch.x0 + eps, x1=batch.x1 + eps)
-            if shard is not None:
-                batch = shard(batch)
-            (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
-            # Optax mixes int step counts with floats; keep it working under strict promotion.
-            with jax.numpy_dtype_promotion("standard"):
-                updates, opt_state = optimizer.update(grads, opt_state, params)
-            params = eqx.apply_updates(params, updates)
-            return (params, opt_state), (value, parts)
+    def body(i, carry):
+        params, opt_state, sums = carry
+        params, opt_state, terms = one(params, opt_state, jr.fold_in(key, i))
+        return params, opt_state, jax.tree_util.tree_map(jnp.add, sums, terms)
 
-        (params, opt_state), (values, parts) = jax.lax.scan(
-            one, (params, opt_state), jr.split(key, length)
-        )
-        return params, opt_state, jnp.mean(values), jax.tree_util.tree_map(jnp.mean, parts)
+    shapes = jax.eval_shape(lambda: one(params, opt_state, key)[2])
+    zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    params, opt_state, (total, parts) = jax.lax.fori_loop(
+        0, length, body, (params, opt_state, zeros))
+    count = jnp.asarray(length, total.dtype)
+    return params, opt_state, total / count, jax.tree_util.tree_map(lambda v: v / count, parts)
 
-    return chunk
+
+_chunk_compiled = eqx.filter_jit(_chunk)
 
 
 def make_lbfgs_chunk(loss: Loss, static: Any) -> tuple[

@@ -22,14 +22,16 @@ from ._errors import MetriplexError
 from ._fit_loop import Evaluation, FitLoop
 from ._fit_options import Checkpoint, LBFGSFinish
 from ._model import AbstractModel, float_dtype, with_dtype
-from ._train import (
-    History,
-    TrainState,
+from ._optimizers import (
     adjustable_optimizer,
     cosine_schedule,
     default_optimizer,
-    default_scale,
     is_adjustable,
+)
+from ._train import (
+    History,
+    TrainState,
+    default_scale,
     make_chunk,
     batch_sharding,
     check_arguments,
@@ -193,7 +195,7 @@ def fit(
         noise = jnp.asarray(input_noise * state_scale(train_rows.x), dtype)
     runs = (consecutive if consecutive > 1 and train_rows.in_runs and loss.reads_runs
             and noise is None and shard is None else 1)
-    run_chunk = eqx.filter_jit(make_chunk(loss, optimizer, static, bsz, shard, noise, runs))
+    run_chunk = make_chunk(loss, optimizer, static, bsz, shard, noise, runs, jit=True)
 
     # Evaluations see fixed spread subsets of the pairs. The training subset carries windows
     # like the training batches (its figures are the first of the training history); the
