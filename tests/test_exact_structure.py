@@ -372,6 +372,6 @@ def test_save_load_round_trip(tmp_path):
     arg = json.dumps({k: [v[0], v[1]] for k, v in expected.items()})
     res = tmp_path / "fresh.npz"
     subprocess.run([sys.executable, "-c", script, arg, str(res)], check=True, timeout=120)
-    fresh = np.load(res)
-    for name, (_, _, pred) in expected.items():
-        assert np.array_equal(fresh[name], pred), name
+    with np.load(res) as fresh:
+        for name, (_, _, pred) in expected.items():
+            assert np.array_equal(fresh[name], pred), name

@@ -88,9 +88,11 @@ def test_experiment_pipeline_writes_everything(tmp_path):
             assert (out / "figures" / f"{stem}.{ext}").exists(), f"{stem}.{ext}"
     # The report figures carry the truth: its own error under Crank-Nicolson beside the
     # learned model's (every test trajectory), and the true states under their own name.
-    error = np.load(out / "figures" / "error.npz")
-    assert error["error"].shape == (5, 21) and error["reference_error"].shape == (21,)
-    assert set(np.load(out / "figures" / "trajectories.npz")) >= {"true", "learned", "t"}
+    # (Each archive closed before the test ends: an open one warns when it is collected.)
+    with np.load(out / "figures" / "error.npz") as error:
+        assert error["error"].shape == (5, 21) and error["reference_error"].shape == (21,)
+    with np.load(out / "figures" / "trajectories.npz") as saved:
+        assert set(saved) >= {"true", "learned", "t"}
 
 
 def test_reproduce_honours_degeneracy_with_and_without_defaults():

@@ -112,13 +112,14 @@ def test_report_figures_of_failing_rollouts(tmp_path):
     for name in FIGURES:
         for ext in ("png", "pdf", "npz"):
             assert (tmp_path / f"{name}.{ext}").is_file(), (name, ext)
-    raw = np.load(tmp_path / "error.npz")
-    failed = raw["failed_step"]
+    with np.load(tmp_path / "error.npz") as raw:
+        failed, error = raw["failed_step"], raw["error"]
     assert failed[3] >= 0 and 0 < np.sum(failed >= 0) < len(failed)
     # A failed rollout has no error after its failure: NaN, never a number standing for it.
     for k in np.flatnonzero(failed >= 0):
-        assert np.all(np.isnan(raw["error"][k, failed[k]:]))
-    energy = np.load(tmp_path / "energy_entropy.npz")["energy"]
+        assert np.all(np.isnan(error[k, failed[k]:]))
+    with np.load(tmp_path / "energy_entropy.npz") as saved:
+        energy = saved["energy"]
     assert np.all(np.isnan(energy[failed[3]:])) and np.all(np.isfinite(energy[:failed[3]]))
 
 
@@ -154,4 +155,5 @@ def test_report_figures_with_fifty_variables(tmp_path):
     report_figures(chain, data, tmp_path, scheme="rk4")
     for name in FIGURES:
         assert (tmp_path / f"{name}.png").is_file(), name
-    assert np.load(tmp_path / "error.npz")["error_per_variable"].shape == (16, n)
+    with np.load(tmp_path / "error.npz") as saved:
+        assert saved["error_per_variable"].shape == (16, n)

@@ -187,6 +187,51 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     np.testing.assert_allclose(ha["valid"]["total"], hb["valid"]["total"], rtol=1e-9)
 
 
+def test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes(tmp_path, monkeypatch, capsys):
+    """Ctrl-C pressed during `metriplex train`, in this process: the command's own handling
+    (exit status 130, what it says, the checkpoint, model and history it keeps, the resumed run
+    continuing that history). The press is sent right after the first checkpoint is written,
+    so the run is inside the training loop. The same through a real process and an
+    asynchronous signal: ``test_ctrl_c_saves_a_checkpoint_and_the_run_resumes`` (slow); the
+    handler itself: tests/test_interrupt.py."""
+    import metriplex._checkpoint as checkpoint
+    from metriplex.cli import main
+
+    _run_data(tmp_path)
+    write, pressed = checkpoint.save, []
+
+    def write_then_press(path, tree, meta):
+        write(path, tree, meta)
+        if not pressed:
+            pressed.append(meta["done"])
+            os.kill(os.getpid(), signal.SIGINT)
+
+    monkeypatch.setattr(checkpoint, "save", write_then_press)
+    # pytest-xdist workers ignore SIGINT; a terminal's Python has the default handler. The
+    # first run's cap of 5 minutes only keeps a broken interrupt from hanging the suite.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        code = main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "run"),
+                     *RUN_OPTS, "--steps", "50000000", "--quiet", "--max-minutes", "5"])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "interrupted" in err and "--resume" in err and "Traceback" not in err
+    assert (tmp_path / "run" / "checkpoint.ckpt").exists()
+    assert (tmp_path / "run" / "model.mpx").exists()
+    h = json.loads((tmp_path / "run" / "history.json").read_text())
+    assert h["stopped"].startswith("interrupted at step") and len(h["step"]) >= 1
+    monkeypatch.setattr(checkpoint, "save", write)
+    assert main(["train", str(tmp_path / "d.npz"), "--out", str(tmp_path / "run"), *RUN_OPTS,
+                 "--steps", "50000000", "--quiet", "--resume", "--max-minutes", "0.001"]) == 0
+    resumed = json.loads((tmp_path / "run" / "history.json").read_text())
+    assert resumed["step"][:len(h["step"])] == h["step"]  # the interrupted history, continued
+    assert resumed["step"][-1] > h["step"][-1]
+    assert resumed["stopped"].startswith("time budget reached"), resumed["stopped"]
+
+
+@pytest.mark.slow
 def test_ctrl_c_saves_a_checkpoint_and_the_run_resumes(tmp_path):
     _run_data(tmp_path)
     opts = [*RUN_OPTS, "--steps", "50000000"]
