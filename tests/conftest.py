@@ -108,9 +108,12 @@ def trained_run(tmp_path_factory):
 # -- one cosine-schedule training with an L-BFGS finish ----------------------------------------
 
 #: The run of ``cosine_lbfgs_run``: 300 Adam steps on a cosine schedule, then 100 L-BFGS
-#: iterations, evaluated every 50.
+#: iterations, evaluated every 50. One stage: with a first stage (the default here since
+#: 2026-11-27) the Adam stage ends elsewhere, and seed 0's finish then lowered the loss to
+#: 0.61 of Adam's instead of 0.33; the first stage has tests of its own.
 COSINE_LBFGS_CONFIG = dict(entropy="sum:2", poisson="canonical:1", width=8, steps=300,
-                           eval_every=50, schedule="cosine", float64=True, lbfgs_steps=100)
+                           eval_every=50, schedule="cosine", float64=True, lbfgs_steps=100,
+                           reversible_first=False)
 
 
 @pytest.fixture(scope="session")
