@@ -90,3 +90,22 @@ def oscillator_data(k=8, n_t=21, names=("q", "p", "s")) -> mx.Trajectories:
 TRAINED_RUN_OPTIONS = ("--entropy", "sum:2", "--poisson", "canonical:1", "--width", "8",
                        "--steps", "20", "--trajectories", "0-5", "--validation-ids", "4,5",
                        "--quiet")
+
+
+def assert_exactly_generic(L, M, grad_energy, grad_entropy) -> np.ndarray:
+    """Check a batch of GENERIC terms (``L``, ``M`` of shape (b, n, n), the gradients (b, n))
+    to rounding: L antisymmetric and M symmetric exactly, M positive semi-definite, L grad S = 0
+    and M grad E = 0 relative to the size of the products' terms (honest at 1e-12 even with
+    states ~1e4), and dS/dt = grad S . M grad S >= 0. Returns the entropy production per state."""
+    L, M, gE, gS = (np.asarray(a, np.float64) for a in (L, M, grad_energy, grad_entropy))
+    np.testing.assert_array_equal(L, -np.swapaxes(L, 1, 2))
+    np.testing.assert_array_equal(M, np.swapaxes(M, 1, 2))
+    norm_M = np.linalg.norm(M, axis=(1, 2))
+    assert np.all(np.linalg.eigvalsh(M)[:, 0] >= -1e-12 * norm_M)
+    LgS = np.linalg.norm(np.einsum("bij,bj->bi", L, gS), axis=1)
+    MgE = np.linalg.norm(np.einsum("bij,bj->bi", M, gE), axis=1)
+    assert np.all(LgS <= 1e-12 * np.linalg.norm(L, axis=(1, 2)) * np.linalg.norm(gS, axis=1))
+    assert np.all(MgE <= 1e-12 * norm_M * np.linalg.norm(gE, axis=1))
+    production = np.einsum("bi,bij,bj->b", gS, M, gS)
+    assert np.all(production >= -1e-13 * norm_M * np.sum(gS**2, axis=1))
+    return production

@@ -1,0 +1,244 @@
+"""Defaults checked on systems outside the zoo: none of them was used to choose a default.
+
+    .venv/bin/python benchmarks/outside_zoo.py                       # all four, one by one
+    .venv/bin/python benchmarks/outside_zoo.py --cases point-vortices --out rows.json
+
+Each case is trained as `benchmarks/zoo.py` trains a zoo case (`zoo.run_case`: the structure
+flags a user who knows the system would give, every other setting at its default), beside an
+unconstrained field on the same data (`zoo.black_box`). The table adds the standardised error
+of the true model rolled out by Crank-Nicolson at the data's step, which says how much of an
+error the step itself makes:
+
+- **double-well-bath** (n = 3): a particle in a double well whose friction heats a bath;
+  canonical L, S = s given.
+- **lotka-volterra** (n = 2): predator and prey in thousands (offsets ~1e3), time in years;
+  L = xy [[0, -1], [1, 0]] non-canonical, learned; no S, no M.
+- **point-vortices** (n = 6): three point vortices of strengths 1, 2, -0.7 in the plane;
+  L constant and non-canonical (1/Gamma_i blocks), learned; E logarithmic; no S, no M.
+- **elastic-pendulum** (n = 4): a spring pendulum in polar coordinates (r, theta, p_r,
+  p_theta); canonical L given, position-dependent kinetic energy p_theta^2 / (2 r^2).
+
+Results: docs/zoo.md, *Outside the zoo*.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+
+import zoo  # noqa: E402
+from metriplex.config import scheme_from_name  # noqa: E402
+from metriplex.structure import CanonicalPoisson, SumOf, ZeroFriction, ZeroPotential  # noqa: E402
+from metriplex.systems import generate  # noqa: E402
+from metriplex.systems._base import BoxSampling, System, analytic_model  # noqa: E402
+from metriplex.systems.zoo import ZooCase  # noqa: E402
+from metriplex.systems.zoo._case import case_settings  # noqa: E402
+
+
+# -- a double well whose friction heats a bath ---------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class DoubleWellConfig:
+    """E = p^2/2 - q^2/2 + q^4/4 + c theta0 (exp((s - s0)/c) - 1), friction gamma."""
+
+    damping: float = 0.05
+    heat_capacity: float = 5.0
+    theta0: float = 2.0
+    s0: float = 10.0
+    x0_center: tuple[float, float, float] = (0.0, 0.0, 10.0)
+    x0_halfwidth: tuple[float, float, float] = (1.6, 0.8, 0.5)
+
+
+def _bath_temperature(c: DoubleWellConfig, s):
+    return c.theta0 * jnp.exp((s - c.s0) / c.heat_capacity)
+
+
+def _double_well_energy(c: DoubleWellConfig, x):
+    q, p, s = x
+    bath = c.heat_capacity * c.theta0 * (jnp.exp((s - c.s0) / c.heat_capacity) - 1.0)
+    return p**2 / 2 - q**2 / 2 + q**4 / 4 + bath
+
+
+def _double_well_friction(c: DoubleWellConfig, x):
+    # (gamma / theta) w w^T with w = (0, theta, -p): M grad E = 0, s' = gamma p^2 / theta.
+    theta = _bath_temperature(c, x[2])
+    w = jnp.stack([jnp.zeros_like(x[1]), theta, -x[1]])
+    return (c.damping / theta) * (w[:, None] * w[None, :])
+
+
+@dataclasses.dataclass(frozen=True)
+class DoubleWellBath(BoxSampling, System):
+    name = "double-well-bath"
+    description = "a double well whose friction heats a bath"
+    names = ("q", "p", "s")
+    defaults = case_settings(dt=0.1, steps=300, trajectories=30)
+    max_substep = 0.005
+    config: DoubleWellConfig = DoubleWellConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_double_well_energy, entropy=SumOf((2,)),
+                              poisson=CanonicalPoisson(3, 1), friction=_double_well_friction)
+
+
+# -- predator and prey ---------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class LotkaVolterraConfig:
+    """u = prey / unit, v = predator / unit; E = a (u - log u) + b (v - 2 log v) and
+    L = x y [[0, -1], [1, 0]]: prey' = b prey (2 - v), predator' = a predator (u - 1)."""
+
+    a: float = 1.0
+    b: float = 0.5
+    unit: float = 1.0e3
+    x0_center: tuple[float, float] = (2.0e3, 1.0e3)
+    x0_halfwidth: tuple[float, float] = (0.8e3, 0.5e3)
+
+
+def _lotka_volterra_energy(c: LotkaVolterraConfig, x):
+    u, v = x[0] / c.unit, x[1] / c.unit
+    return c.a * (u - jnp.log(u)) + c.b * (v - 2.0 * jnp.log(v))
+
+
+def _lotka_volterra_poisson(c: LotkaVolterraConfig, x):
+    return jnp.array([[0.0, -1.0], [1.0, 0.0]], x.dtype) * (x[0] * x[1])
+
+
+@dataclasses.dataclass(frozen=True)
+class LotkaVolterra(BoxSampling, System):
+    name = "lotka-volterra"
+    description = "predator and prey (thousands, years): non-canonical L"
+    names = ("prey", "predator")
+    defaults = case_settings(dt=0.02, steps=400, trajectories=20)
+    max_substep = 0.001
+    config: LotkaVolterraConfig = LotkaVolterraConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_lotka_volterra_energy,
+                              entropy=ZeroPotential(), poisson=_lotka_volterra_poisson,
+                              friction=ZeroFriction(2))
+
+
+# -- three point vortices ------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class VorticesConfig:
+    """Strengths Gamma_i; state (x1, y1, x2, y2, x3, y3)."""
+
+    strengths: tuple[float, float, float] = (1.0, 2.0, -0.7)
+    x0_center: tuple[float, ...] = (1.0, 0.0, -0.5, 0.8, -0.4, -1.0)
+    x0_halfwidth: tuple[float, ...] = (0.15,) * 6
+
+
+def _vortex_energy(c: VorticesConfig, x):
+    g, xs, ys = c.strengths, x[0::2], x[1::2]
+    return -sum(g[i] * g[j] * jnp.log((xs[i] - xs[j])**2 + (ys[i] - ys[j])**2)
+                for i in range(3) for j in range(i + 1, 3)) / (4.0 * jnp.pi)
+
+
+def _vortex_poisson(c: VorticesConfig, x):
+    block = jnp.array([[0.0, 1.0], [-1.0, 0.0]], x.dtype)
+    return jax.scipy.linalg.block_diag(*(block / g for g in c.strengths))
+
+
+@dataclasses.dataclass(frozen=True)
+class PointVortices(BoxSampling, System):
+    name = "point-vortices"
+    description = "three point vortices in the plane: constant non-canonical L"
+    names = ("x1", "y1", "x2", "y2", "x3", "y3")
+    defaults = case_settings(dt=0.05, steps=200, trajectories=25)
+    max_substep = 0.002
+    config: VorticesConfig = VorticesConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_vortex_energy, entropy=ZeroPotential(),
+                              poisson=_vortex_poisson, friction=ZeroFriction(6))
+
+
+# -- a spring pendulum ---------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class ElasticPendulumConfig:
+    """Unit mass; spring constant k, rest length l0, gravity g."""
+
+    stiffness: float = 40.0
+    gravity: float = 9.81
+    rest_length: float = 1.0
+    x0_center: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    x0_halfwidth: tuple[float, float, float, float] = (0.1, 0.5, 1.0, 1.0)
+
+
+def _elastic_pendulum_energy(c: ElasticPendulumConfig, x):
+    r, theta, p_r, p_theta = x
+    return (p_r**2 / 2 + p_theta**2 / (2 * r**2) + c.stiffness * (r - c.rest_length)**2 / 2
+            - c.gravity * r * jnp.cos(theta))
+
+
+@dataclasses.dataclass(frozen=True)
+class ElasticPendulum(BoxSampling, System):
+    name = "elastic-pendulum"
+    description = "a spring pendulum in polar coordinates: position-dependent kinetic energy"
+    names = ("r", "theta", "p_r", "p_theta")
+    defaults = case_settings(dt=0.02, steps=250, trajectories=30)
+    max_substep = 0.001
+    config: ElasticPendulumConfig = ElasticPendulumConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_elastic_pendulum_energy,
+                              entropy=ZeroPotential(), poisson=CanonicalPoisson(4, 2),
+                              friction=ZeroFriction(4))
+
+
+CASES = {c.name: c for c in (
+    ZooCase.of(DoubleWellBath(), {"poisson": "canonical:1", "entropy": "sum:2"}),
+    ZooCase.of(LotkaVolterra(), {"entropy": "zero", "friction": "zero"}, time_unit="yr"),
+    ZooCase.of(PointVortices(), {"entropy": "zero", "friction": "zero"}),
+    ZooCase.of(ElasticPendulum(), {"poisson": "canonical:2", "entropy": "zero",
+                                   "friction": "zero"}),
+)}
+
+
+def truth_error(case: ZooCase, seed: int = 0) -> float:
+    """The standardised rel. L2 of the true model rolled out by Crank-Nicolson at the case's
+    step, on the test data that ``zoo.run_case`` draws."""
+    test = generate(case.system, trajectories=case.test_trajectories, steps=case.horizon_steps,
+                    dt=case.dt, seed=1000 + seed)
+    return zoo.standardised_error(case.system.model, test, scheme_from_name("cn"))[0]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", default=",".join(CASES), help="comma list of " + ", ".join(CASES))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", default=None, help="write the rows to this JSON file")
+    args = ap.parse_args(argv)
+    jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
+    names = [c.strip() for c in args.cases.split(",") if c.strip()]
+    unknown = sorted(set(names) - set(CASES))
+    if unknown:
+        ap.error(f"--cases: unknown {unknown}; choose from {', '.join(CASES)}")
+    rows = []
+    print("| system | n | flags | standardised rel. L2 | failed | black box | true field, CN | "
+          "train s |\n|---|---|---|---|---|---|---|---|")
+    for name in names:
+        case = CASES[name]
+        row = zoo.run_case(case, {}, Path(tempfile.mkdtemp()), seed=args.seed,
+                           with_black_box=True)
+        row["truth_cn_standardised"] = truth_error(case, args.seed)
+        rows.append(row)
+        box = row["black_box"]
+        print(f"| {name} | {row['n']} | `{row['flags']}` | {row['rel_l2_standardised']:.3g} | "
+              f"{row['failed']}/{row['test_trajectories']} | {box['standardised']:.3g} "
+              f"({box['failed']} failed) | {row['truth_cn_standardised']:.3g} | "
+              f"{row['train_seconds']:.0f} |", flush=True)
+    if args.out:
+        Path(args.out).write_text(json.dumps(rows, indent=1, default=str))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,77 @@
+"""The systems of benchmarks/outside_zoo.py (defaults checked outside the zoo): exactly GENERIC,
+and the equations their docstrings state."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+
+import outside_zoo  # noqa: E402
+from helpers import assert_exactly_generic  # noqa: E402
+
+NAMES = sorted(outside_zoo.CASES)
+
+
+def _states(name: str) -> np.ndarray:
+    return outside_zoo.CASES[name].system.sample_initial(16, seed=3)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_each_system_is_exactly_generic(name):
+    system = outside_zoo.CASES[name].system
+    model = system.model
+    x = _states(name)
+    t = jax.jit(jax.vmap(model.terms))(x)
+    assert_exactly_generic(t.poisson, t.friction, t.grad_energy, t.grad_entropy)
+    L = np.asarray(t.poisson)
+    jacobi = np.asarray(jax.jit(jax.vmap(model.jacobi_tensor))(x))
+    dL = np.asarray(jax.jit(jax.vmap(jax.jacfwd(model.poisson_matrix)))(x))
+    scale = x.shape[1] * np.max(np.abs(L)) * max(np.max(np.abs(dL)), 1.0)
+    assert np.max(np.abs(jacobi)) <= 1e-10 * scale
+
+
+def _field(name: str, x: np.ndarray) -> np.ndarray:
+    model = outside_zoo.CASES[name].system.model
+    return np.asarray(jax.jit(jax.vmap(model.vector_field))(x))
+
+
+def test_the_stated_equations():
+    x = _states("double-well-bath")
+    c = outside_zoo.DoubleWellConfig()
+    q, p, s = x.T
+    theta = c.theta0 * np.exp((s - c.s0) / c.heat_capacity)
+    expected = np.stack([p, q - q**3 - c.damping * p, c.damping * p**2 / theta], axis=1)
+    np.testing.assert_allclose(_field("double-well-bath", x), expected, rtol=1e-12, atol=1e-12)
+
+    x = _states("lotka-volterra")
+    c = outside_zoo.LotkaVolterraConfig()
+    u, v = x[:, 0] / c.unit, x[:, 1] / c.unit
+    expected = np.stack([c.b * x[:, 0] * (2.0 - v), c.a * x[:, 1] * (u - 1.0)], axis=1)
+    np.testing.assert_allclose(_field("lotka-volterra", x), expected, rtol=1e-12)
+
+    x = _states("elastic-pendulum")
+    c = outside_zoo.ElasticPendulumConfig()
+    r, th, pr, pth = x.T
+    expected = np.stack([pr, pth / r**2,
+                         pth**2 / r**3 - c.stiffness * (r - c.rest_length) + c.gravity * np.cos(th),
+                         -c.gravity * r * np.sin(th)], axis=1)
+    np.testing.assert_allclose(_field("elastic-pendulum", x), expected, rtol=1e-12, atol=1e-12)
+
+    # Point vortices: Gamma_i x_i' = dH/dy_i, Gamma_i y_i' = -dH/dx_i, with
+    # H = -sum_{i<j} Gamma_i Gamma_j log(r_ij^2) / (4 pi): x_i' = -sum_j Gamma_j (y_i - y_j) /
+    # (2 pi r_ij^2), y_i' = sum_j Gamma_j (x_i - x_j) / (2 pi r_ij^2).
+    x = _states("point-vortices")
+    g = np.asarray(outside_zoo.VorticesConfig().strengths)
+    xs, ys = x[:, 0::2], x[:, 1::2]
+    dx, dy = xs[:, :, None] - xs[:, None, :], ys[:, :, None] - ys[:, None, :]
+    r2 = dx**2 + dy**2 + np.eye(3)  # the diagonal (i = j) is masked by dx = dy = 0
+    u = -np.sum(g[None, None, :] * dy / (2 * np.pi * r2), axis=2)
+    w = np.sum(g[None, None, :] * dx / (2 * np.pi * r2), axis=2)
+    expected = np.stack([u, w], axis=2).reshape(len(x), 6)
+    np.testing.assert_allclose(_field("point-vortices", x), expected, rtol=1e-10, atol=1e-12)
