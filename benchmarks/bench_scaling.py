@@ -18,7 +18,7 @@ What is measured, and how:
   ``_build.units_for`` / ``build_model`` / ``build_loss`` in the data's units, float32, and fit's
   optimiser under the default plateau schedule (``_optimizers.adjustable_optimizer``).
 - **step**: ``metriplex._train.make_chunk``, the compiled unit that ``metriplex.fit`` runs
-  (random minibatch, ``value_and_grad`` of the loss, Adam; ``length`` steps per ``lax.scan``), as
+  (random minibatch, ``value_and_grad`` of the loss, Adam; ``length`` steps in one compiled loop), as
   ``benchmarks/run.py`` times it. Two chunk lengths are compiled (``--short`` steps, and
   ``--long`` or as many as take about ``--chunk-seconds`` of CPU time) and run alternately;
   per step = (time of the long chunk - time of the short chunk) / (difference in steps), so

@@ -9,7 +9,7 @@ What is measured, and how:
 
 - **training step**: the compiled chunk of :func:`metriplex.fit` itself
   (``metriplex._train.make_chunk``: random minibatch, ``value_and_grad`` of the loss, Adam
-  update, ``length`` steps per ``lax.scan``), on a model and loss made by
+  update, ``length`` steps in one compiled loop), on a model and loss made by
   ``_build.build_model`` / ``_build.build_loss`` from data of ``metriplex.systems.generate``.
   Times are medians over repeats after compilation. ``cpu ms`` is process CPU time per step
   (with one compute thread this is the step's cost, and other processes on a shared machine

@@ -81,6 +81,7 @@ def test_train_tries_the_starts_and_records_their_number(tmp_path, capsys, caplo
     data = generate("rigid-body", trajectories=4, steps=30, seed=0)
     config = RunConfig(entropy="zero", friction="zero", steps=200, eval_every=50,
                        average_steps=0, validation=0.25, starts=2)
+    jax.clear_caches()  # count this run's compilations, whatever ran before in this process
     with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
         train_run(data, config, tmp_path / "run", progress=False)
     # Each start trains a tenth of --steps at most (20 here, 1000 by default).

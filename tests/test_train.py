@@ -218,6 +218,7 @@ def test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes(tmp_path, monkey
         signal.signal(signal.SIGINT, previous)
     err = capsys.readouterr().err
     assert code == 130, err
+    assert len(pressed) == 1  # pressed once, after the first checkpoint
     assert "interrupted" in err and "--resume" in err and "Traceback" not in err
     assert (tmp_path / "run" / "checkpoint.ckpt").exists()
     assert (tmp_path / "run" / "model.mpx").exists()

@@ -4,7 +4,9 @@ with :func:`learning_rate_of` and :func:`with_learning_rate`) and :func:`default
 on the fixed :func:`cosine_schedule`).
 
 Both are memoised: ``fit`` calls with the same settings get the same optimiser object, so the
-chunk compiled for one (``_train.make_chunk(..., jit=True)``) serves the next.
+chunk compiled for one (``_train.make_chunk(..., jit=True)``) serves the next. The compiled
+chunks of a process's fits stay cached while it runs (one per loss, optimiser, model
+structure and shapes); ``jax.clear_caches()`` frees them.
 """
 
 from __future__ import annotations
@@ -16,13 +18,17 @@ import jax.numpy as jnp
 import optax
 
 
-@functools.lru_cache(maxsize=64)
 def adjustable_optimizer(learning_rate: float, warmup: int = 100,
                          weight_decay: float = 0.0) -> optax.GradientTransformation:
     """Adam (gradients clipped to norm 10) with a linear warm-up from 10% over ``warmup`` steps,
     whose learning rate the training loop can change between chunks
     (:func:`with_learning_rate`); ``weight_decay`` > 0 makes it AdamW (decoupled decay of every
-    weight)."""
+    weight). Any real scalars (Python, NumPy or 0-d JAX values) are accepted."""
+    return _adjustable(float(learning_rate), int(warmup), float(weight_decay))
+
+
+@functools.lru_cache(maxsize=64)
+def _adjustable(learning_rate: float, warmup: int, weight_decay: float):
     return optax.chain(
         optax.clip_by_global_norm(10.0),
         optax.scale_by_adam(),
@@ -45,10 +51,14 @@ def cosine_schedule(learning_rate: float, steps: int) -> optax.Schedule:
     )
 
 
-@functools.lru_cache(maxsize=64)
 def default_optimizer(learning_rate: float, steps: int) -> optax.GradientTransformation:
     """Adam on the :func:`cosine_schedule` (the optimiser of ``fit(..., stopping=None)``: a
     fixed number of steps)."""
+    return _default(float(learning_rate), int(steps))
+
+
+@functools.lru_cache(maxsize=64)
+def _default(learning_rate: float, steps: int):
     return optax.chain(optax.clip_by_global_norm(10.0),
                        optax.adam(cosine_schedule(learning_rate, steps)))
 

@@ -3,7 +3,7 @@ r"""Training: ``fit(model, data, ...) -> (model, history)``.
 An Optax loop over random minibatches of data pairs, with validation on held-out
 **trajectories** (never pairs of a training trajectory), early stopping that keeps the best
 validation model, and a history of every loss term. Many optimiser steps run inside one
-compiled ``lax.scan`` between validations, so Python overhead stays off the hot path.
+compiled loop between validations, so Python overhead stays off the hot path.
 """
 
 from __future__ import annotations
