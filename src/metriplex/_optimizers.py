@@ -34,9 +34,9 @@ def _adjustable(learning_rate: float, warmup: int, weight_decay: float):
         optax.scale_by_adam(),
         optax.add_decayed_weights(weight_decay) if weight_decay else optax.identity(),
         optax.scale_by_schedule(
-            optax.linear_schedule(0.1, 1.0, max(int(warmup), 1))
+            optax.linear_schedule(0.1, 1.0, max(warmup, 1))
         ),
-        optax.inject_hyperparams(optax.scale)(step_size=-float(learning_rate)),
+        optax.inject_hyperparams(optax.scale)(step_size=-learning_rate),
     )
 
 

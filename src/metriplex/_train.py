@@ -118,7 +118,8 @@ def _chunk(params, opt_state, key, length, full_train, *, loss, optimizer, stati
     def loss_fn(p, batch, k):
         return loss(eqx.combine(p, static), batch, key=k)
 
-    def one(params, opt_state, k):
+    def draw(k):
+        """The batch of the step whose key is ``k``, and the key of its loss."""
         kb, kl = jr.split(k)
         if consecutive > 1:
             start = jr.randint(kb, (max(1, batch_size // consecutive),), 0,
@@ -133,6 +134,10 @@ def _chunk(params, opt_state, key, length, full_train, *, loss, optimizer, stati
             batch = batch._replace(x0=batch.x0 + eps, x1=batch.x1 + eps)
         if shard is not None:
             batch = shard(batch)
+        return batch, kl
+
+    def one(params, opt_state, k):
+        batch, kl = draw(k)
         (value, parts), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, batch, kl)
         # Optax mixes int step counts with floats; keep it working under strict promotion.
         with jax.numpy_dtype_promotion("standard"):
@@ -145,7 +150,9 @@ def _chunk(params, opt_state, key, length, full_train, *, loss, optimizer, stati
         params, opt_state, terms = one(params, opt_state, jr.fold_in(key, i))
         return params, opt_state, jax.tree_util.tree_map(jnp.add, sums, terms)
 
-    shapes = jax.eval_shape(lambda: one(params, opt_state, key)[2])
+    # The running sums start at zeros shaped as the loss and its terms (traced without the
+    # gradient and the update).
+    shapes = jax.eval_shape(lambda: loss_fn(params, *draw(key)))
     zeros = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
     params, opt_state, (total, parts) = jax.lax.fori_loop(
         0, length, body, (params, opt_state, zeros))
