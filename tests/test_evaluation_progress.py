@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 import metriplex as mx
-from metriplex import _progress
+from metriplex import _progress, _sensitivity
 from metriplex import diagnostics
 from metriplex.cli import main
 from metriplex.app.config import scheme_from_name
@@ -97,8 +97,9 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCHES", 3)  # 6 trajectories: 2 a batch
     calls = []
     solve = diagnostics.solve
-    monkeypatch.setattr(diagnostics, "solve",
-                        lambda *a, **k: calls.append(a[2].shape) or solve(*a, **k))
+    for module in (diagnostics, _sensitivity):
+        monkeypatch.setattr(module, "solve",
+                            lambda *a, **k: calls.append(a[2].shape) or solve(*a, **k))
     res = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--figures",
               tmp_path / "fig", "--out", tmp_path / "m.json")
     assert res.returncode == 0, res.stderr
@@ -106,9 +107,10 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     # and one over what follows them (seconds on large data), naming each phase
     assert "diagnostics:" in res.stderr and "3/3 [" in res.stderr, res.stderr
     assert "structure residuals" in res.stderr, res.stderr
-    # Three batches, once for the metrics and the figures together; then one rollout of the
-    # step check, every interval in four (the data-grid rollout is reused, not repeated).
-    assert calls == [(2, 11)] * 3 + [(6, 41)], calls
+    # Three batches, once for the metrics and the figures together; then the step check's
+    # rollout with every interval in four, as four rollouts of the data grid's shape, one
+    # after another (the data-grid rollout itself is reused, not repeated).
+    assert calls == [(2, 11)] * 3 + [(6, 11)] * 4, calls
     assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == list(range(6))
     assert (tmp_path / "fig" / "error.png").exists()
     quiet = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--quiet")

@@ -37,6 +37,7 @@ from .data import Trajectories, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 from ._progress import progress_bar
+from ._sensitivity import step_sensitivity as step_sensitivity
 
 _TINY = 1e-300
 
@@ -260,81 +261,6 @@ def evaluate(
     report.update(structure)
     report["null_reasons"] = null_reasons
     return report
-
-
-#: Defaults of :func:`step_sensitivity`: the step is refined this many times, over the first
-#: ``SENSITIVITY_STEPS`` intervals of at most ``SENSITIVITY_TRAJECTORIES`` trajectories.
-SENSITIVITY_REFINE = 4
-SENSITIVITY_STEPS = 200
-SENSITIVITY_TRAJECTORIES = 10
-
-
-@in_full_precision
-def step_sensitivity(model: GenericModel, data: Trajectories, *,
-                     scheme: AbstractScheme | None = None, refine: int = SENSITIVITY_REFINE,
-                     steps: int = SENSITIVITY_STEPS,
-                     trajectories: int = SENSITIVITY_TRAJECTORIES,
-                     rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
-                     ) -> tuple[float | None, str]:
-    r"""How much of the model's predicted motion changes when the time step is refined.
-
-    From the first state of up to ``trajectories`` trajectories (evenly spread), the model is
-    rolled out over the first ``steps`` intervals of the data's own grid, once on that grid and
-    once with every interval split into ``refine`` equal steps. Returns
-    ``(value, note)``, with
-
-    .. math:: \text{value} = \frac{\|D^{-1}(x^{\Delta t} - x^{\Delta t/r})\|}
-              {\|D^{-1}(x^{\Delta t/r} - x_0)\|}
-
-    over all compared states (``D``: the data's standard deviations), or ``None`` and why
-    when no trajectory completed both rollouts.
-
-    A model of the system's vector field, integrated by a convergent scheme, gives nearly the
-    same motion with either step (second order: a change of about :math:`(1 - 1/r^2)` of the
-    scheme's own error). A value near 1 or above says the prediction is a property of the
-    scheme at the data's step: the field was learned so that *this* scheme at *this* step
-    reproduces the data (a "modified" field, e.g. with stiff modes that the scheme damps or
-    flips), or the data's step does not resolve the dynamics. Either way the field is not a
-    trustworthy model of :math:`\dot x` between samples.
-
-    ``rollout``: what :func:`rollout_data` returned for this model, data and scheme; its
-    states on the data's grid are reused, so only the refined rollout is computed.
-    """
-    scheme = CrankNicolson() if scheme is None else scheme
-    ts, xs, lengths = data.padded()
-    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
-                     .astype(int))
-    w = int(min(steps + 1, np.min(lengths[pick])))
-    if w < 2:
-        return None, "no trajectory has two states"
-    grid = ts[pick, :w]
-    frac = np.arange(refine) / refine
-    fine = (grid[:, :-1, None] + np.diff(grid, axis=1)[:, :, None] * frac).reshape(len(pick), -1)
-    fine = np.concatenate([fine, grid[:, -1:]], axis=1)
-    dtype = float_dtype(model)
-    x0 = jnp.asarray(xs[pick, 0], dtype)
-    if rollout is None:
-        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
-        on_grid, failed = np.asarray(out.xs, np.float64), np.asarray(out.failed_step)
-    else:
-        on_grid = np.asarray(rollout[0].xs, np.float64)[pick, :w]
-        failed = np.asarray(rollout[0].failed_step)[pick]
-        failed = np.where(failed >= w, -1, failed)
-    # Retried as the evaluation's rollouts are, so a model they complete is compared here too.
-    refined = solve(model, x0, jnp.asarray(fine, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
-    ok = (failed < 0) & (np.asarray(refined.failed_step) < 0)
-    if not ok.any():
-        return None, (f"every rollout failed, with the data's step or one {refine}x smaller "
-                      f"({len(pick)} trajectories)")
-    d = state_scale(data.x)[None, None, :]
-    pc = on_grid[ok] / d
-    pf = np.asarray(refined.xs, np.float64)[ok][:, ::refine] / d
-    start = np.asarray(xs[pick, 0], np.float64)[ok][:, None, :] / d
-    num = float(np.sqrt(np.sum((pc - pf) ** 2)))
-    den = float(np.sqrt(np.sum((pf - start) ** 2)))
-    if not np.isfinite(num) or den <= _TINY:
-        return None, "the refined rollouts do not move from their first states"
-    return num / den, (f"{int(ok.sum())} trajectories, {w - 1} steps, step refined {refine}x")
 
 
 #: A state "decreases the entropy" when dS/dt < -PRODUCTION_TOLERANCE * |D grad S| |D^-1 dx/dt|:

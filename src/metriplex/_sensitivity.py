@@ -1,0 +1,115 @@
+"""How much of a model's predicted motion changes when the data's time step is refined
+(:func:`step_sensitivity`, reported by :func:`metriplex.evaluate` with ``step_check=True``)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._model import GenericModel, float_dtype
+from ._precision import in_full_precision
+from ._solve.rollout import RETRY_SUBSTEPS
+from .data import Trajectories, state_scale
+from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
+
+_TINY = 1e-300
+
+
+#: Defaults of :func:`step_sensitivity`: the step is refined this many times, over the first
+#: ``SENSITIVITY_STEPS`` intervals of at most ``SENSITIVITY_TRAJECTORIES`` trajectories.
+SENSITIVITY_REFINE = 4
+SENSITIVITY_STEPS = 200
+SENSITIVITY_TRAJECTORIES = 10
+
+
+@in_full_precision
+def step_sensitivity(model: GenericModel, data: Trajectories, *,
+                     scheme: AbstractScheme | None = None, refine: int = SENSITIVITY_REFINE,
+                     steps: int = SENSITIVITY_STEPS,
+                     trajectories: int = SENSITIVITY_TRAJECTORIES,
+                     rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
+                     ) -> tuple[float | None, str]:
+    r"""How much of the model's predicted motion changes when the time step is refined.
+
+    From the first state of up to ``trajectories`` trajectories (evenly spread), the model is
+    rolled out over the first ``steps`` intervals of the data's own grid, once on that grid and
+    once with every interval split into ``refine`` equal steps. Returns
+    ``(value, note)``, with
+
+    .. math:: \text{value} = \frac{\|D^{-1}(x^{\Delta t} - x^{\Delta t/r})\|}
+              {\|D^{-1}(x^{\Delta t/r} - x_0)\|}
+
+    over all compared states (``D``: the data's standard deviations), or ``None`` and why
+    when no trajectory completed both rollouts.
+
+    A model of the system's vector field, integrated by a convergent scheme, gives nearly the
+    same motion with either step (second order: a change of about :math:`(1 - 1/r^2)` of the
+    scheme's own error). A value near 1 or above says the prediction is a property of the
+    scheme at the data's step: the field was learned so that *this* scheme at *this* step
+    reproduces the data (a "modified" field, e.g. with stiff modes that the scheme damps or
+    flips), or the data's step does not resolve the dynamics. Either way the field is not a
+    trustworthy model of :math:`\dot x` between samples.
+
+    ``rollout``: what :func:`metriplex.diagnostics.rollout_data` returned for this model, data and scheme; its
+    states on the data's grid are reused, so only the refined rollout is computed. The refined
+    rollout runs as ``refine`` rollouts of that shape, one after another, so it reuses their
+    compiled program where the data's grid is all compared.
+    """
+    scheme = CrankNicolson() if scheme is None else scheme
+    ts, xs, lengths = data.padded()
+    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
+                     .astype(int))
+    w = int(min(steps + 1, np.min(lengths[pick])))
+    if w < 2:
+        return None, "no trajectory has two states"
+    grid = ts[pick, :w]
+    frac = np.arange(refine) / refine
+    fine = (grid[:, :-1, None] + np.diff(grid, axis=1)[:, :, None] * frac).reshape(len(pick), -1)
+    fine = np.concatenate([fine, grid[:, -1:]], axis=1)
+    dtype = float_dtype(model)
+    x0 = jnp.asarray(xs[pick, 0], dtype)
+    if rollout is None:
+        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
+        on_grid, failed = np.asarray(out.xs, np.float64), np.asarray(out.failed_step)
+    else:
+        on_grid = np.asarray(rollout[0].xs, np.float64)[pick, :w]
+        failed = np.asarray(rollout[0].failed_step)[pick]
+        failed = np.where(failed >= w, -1, failed)
+    refined, refined_failed = _refined_rollout(model, scheme, x0, fine, w)
+    ok = (failed < 0) & (refined_failed < 0)
+    if not ok.any():
+        return None, (f"every rollout failed, with the data's step or one {refine}x smaller "
+                      f"({len(pick)} trajectories)")
+    d = state_scale(data.x)[None, None, :]
+    pc = on_grid[ok] / d
+    pf = refined[ok][:, ::refine] / d
+    start = np.asarray(xs[pick, 0], np.float64)[ok][:, None, :] / d
+    num = float(np.sqrt(np.sum((pc - pf) ** 2)))
+    den = float(np.sqrt(np.sum((pf - start) ** 2)))
+    if not np.isfinite(num) or den <= _TINY:
+        return None, "the refined rollouts do not move from their first states"
+    return num / den, (f"{int(ok.sum())} trajectories, {w - 1} steps, step refined {refine}x")
+
+
+def _refined_rollout(model, scheme, x0, fine, w):
+    """The rollout on the refined grid ``fine`` (``(B, refine (w - 1) + 1)``), as ``refine``
+    rollouts of ``w`` states each, every one from the last state of the one before: the shape
+    of the rollout on the data's grid, whose compiled program it reuses (for data of at most
+    ``SENSITIVITY_TRAJECTORIES`` trajectories of at most ``SENSITIVITY_STEPS`` steps, the
+    evaluation's own). Retried as the evaluation's rollouts are, so a model they complete is
+    compared here too. Returns the states (float64, NaN from a failure on) and the index of
+    the first failed state per trajectory (-1: none)."""
+    dtype = float_dtype(model)
+    x, failed, parts = x0, np.full(x0.shape[0], -1), [np.asarray(x0, np.float64)[:, None]]
+    for k in range(0, fine.shape[1] - 1, w - 1):
+        out = solve(model, x, jnp.asarray(fine[:, k:k + w], dtype), scheme=scheme,
+                    retry=RETRY_SUBSTEPS)
+        piece = np.asarray(out.failed_step)
+        failed = np.where((failed < 0) & (piece >= 0), k + piece, failed)
+        parts.append(np.asarray(out.xs, np.float64)[:, 1:])
+        # a failed trajectory goes on from a finite state; its states are not compared
+        x = jnp.where(jnp.asarray(failed < 0)[:, None], out.xs[:, -1], x)
+    xs = np.concatenate(parts, axis=1)
+    last = np.where(failed < 0, xs.shape[1], failed)
+    xs[np.arange(xs.shape[1])[None, :] >= last[:, None]] = np.nan
+    return xs, failed
