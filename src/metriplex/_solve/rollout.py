@@ -58,11 +58,12 @@ def _predict(x, d1, h1, d2, h2, h):
     return x + h * s1 + (h * (h + h1)) * curv
 
 
-def _rollout(model, scheme, x0, ts, retry=0):
+def _rollout(model, scheme, x0, ts, retry):
     """Roll out a batch: ``x0`` ``(B, n)``, ``ts`` ``(B, T)``; the scan runs over time and each
     step advances the whole batch at once (so the scheme can decide per step, for the batch,
-    whether Newton is needed). ``retry`` (static): a step whose solve fails is taken again as
-    that many equal substeps before the trajectory is marked failed (0: never)."""
+    whether Newton is needed). ``retry`` (an integer array, traced: one program serves every
+    value): a step whose solve fails is taken again as that many equal substeps before the
+    trajectory is marked failed (0: never)."""
     dts = jnp.diff(ts, axis=-1).T  # (T - 1, B)
     zero = jnp.zeros(x0.shape[:1], x0.dtype)
 
@@ -71,10 +72,7 @@ def _rollout(model, scheme, x0, ts, retry=0):
         # A failed trajectory takes zero steps from here on: its solves end at once.
         h = jnp.where(failed, 0.0, dt)
         guess = jax.vmap(_predict)(x, d1, h1, d2, h2, h)
-        if retry:
-            y, ok, its = _step_or_retry(model, scheme, x, h, guess, retry)
-        else:
-            y, ok, its = scheme.step_batch(model, x, h, guess)
+        y, ok, its = _step_or_retry(model, scheme, x, h, guess, retry)
         moved = h > 0
         bad = failed | (moved & ~ok)
         y = jnp.where(moved[:, None], y, x)  # a zero step keeps the state exactly
@@ -110,8 +108,9 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
     The scheme's step appears once in the program, in a loop whose rounds are the first
     attempt and then the substeps (each row at its own stage; a row that is done takes zero
     steps), so the retry adds no second copy of the solver to compile (an evaluation's
-    rollout compiled in 2.4 s with one, 1.3 s now; oscillator-bath model). A step that
-    converges at once takes one round.
+    rollout compiled in 2.4 s with one, 1.3 s now; oscillator-bath model), and ``retry`` is
+    traced: the rollouts with and without it (training's held-out ones, the evaluation's) are
+    one program. A step that converges at once takes one round.
     """
     dtype = jnp.asarray(0).dtype
 
@@ -121,14 +120,14 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
         z, ok1, its1 = scheme.step_batch(model, y, jnp.where(active, step, 0.0),
                                          jnp.where(active[:, None], y + dy, y))
         done = active & ok1
-        first_failure = active & ~ok1 & ~retrying
-        failed = active & ~ok1 & retrying
+        first_failure = active & ~ok1 & ~retrying & (retry > 0)
+        failed = active & ~ok1 & ~first_failure
         a = done[:, None]
         return (jnp.where(first_failure[:, None], x, jnp.where(a, z, y)),
                 jnp.where(first_failure[:, None], 0.0, jnp.where(a, z - y, dy)),
                 jnp.where(first_failure, retry,
                           jnp.where(done, left - 1, jnp.where(failed, 0, left))),
-                jnp.where(first_failure, h / retry, step),
+                jnp.where(first_failure, h / jnp.maximum(retry, 1).astype(h.dtype), step),
                 ok & ~failed,
                 its + jnp.where(active, jnp.asarray(its1, dtype), 0),
                 retrying | first_failure)
@@ -142,7 +141,7 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
 
 
 @eqx.filter_jit
-def _rollout_one(model, scheme, x0, ts, retry=0):
+def _rollout_one(model, scheme, x0, ts, retry):
     xs, failed, its = _rollout(model, scheme, x0[None], ts[None], retry)
     return xs[0], failed[0], its[0]
 
@@ -229,13 +228,13 @@ def solve(
     :data:`RETRY_SUBSTEPS`.
     """
     retry = expect_integer(retry, what="retry", least=0)
-    out = _solve(model, x0, ts, scheme, retry)
+    out = _solve(model, x0, ts, scheme, jnp.asarray(retry, jnp.asarray(0).dtype))
     if throw:
         _raise_first_failure(out, scheme)
     return out
 
 
-def _solve(model, x0, ts, scheme, retry=0) -> Rollout:
+def _solve(model, x0, ts, scheme, retry) -> Rollout:
     scheme = CrankNicolson() if scheme is None else scheme
     x0 = jnp.asarray(x0)
     ts = jnp.asarray(ts, dtype=x0.dtype)
