@@ -21,6 +21,8 @@ JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
 import equinox as eqx
@@ -58,8 +60,9 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
 
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
     Data of more than :data:`ROLLOUT_BATCH_STATES` states are rolled out in
-    :data:`ROLLOUT_BATCHES` batches of trajectories (all of one shape, so compiled once), with a
-    progress bar when ``progress``; the results are those of one call.
+    :data:`ROLLOUT_BATCHES` batches of trajectories (all of one shape, so compiled once; on the
+    CPU as many side by side as there are cores), with a progress bar when ``progress``; the
+    results are those of one call.
     """
     ts, xs, lengths = data.padded()
     dtype = float_dtype(model)
@@ -69,21 +72,53 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
         out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme,
                     retry=retry)
         return out, xs, lengths
-    parts = []
+
+    def batch(a):
+        b = min(a + size, K)
+        x0, grid = xs[a:b, 0], ts[a:b]
+        if b - a < size:  # pad the last batch with trajectories that never move
+            pad = size - (b - a)
+            x0 = np.concatenate([x0, np.repeat(x0[-1:], pad, axis=0)])
+            grid = np.concatenate([grid, np.full((pad, T), grid[-1, 0])])
+        out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme,
+                    retry=retry)
+        return [np.asarray(v)[: b - a] for v in out]
+
+    starts = range(0, K, size)
     with progress_bar(total=K, disable=not progress, desc="rollouts", unit="trajectory",
                       leave=False) as bar:
-        for a in range(0, K, size):
-            b = min(a + size, K)
-            x0, grid = xs[a:b, 0], ts[a:b]
-            if b - a < size:  # pad the last batch with trajectories that never move
-                pad = size - (b - a)
-                x0 = np.concatenate([x0, np.repeat(x0[-1:], pad, axis=0)])
-                grid = np.concatenate([grid, np.full((pad, T), grid[-1, 0])])
-            out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme,
-                        retry=retry)
-            parts.append([np.asarray(v)[: b - a] for v in out])
-            bar.update(b - a)
+        parts = [batch(0)]  # compiles the program the other batches run
+        bar.update(len(parts[0][1]))
+        with ThreadPoolExecutor(_rollout_threads()) as pool:
+            for part in pool.map(_in_this_threads_config(batch), starts[1:]):
+                parts.append(part)
+                bar.update(len(part[1]))
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths
+
+
+def _rollout_threads() -> int:
+    """How many batches of rollouts run at once: one per CPU core on the CPU (each batch is
+    one compiled program whose many small operations run on one core, and JAX runs programs
+    of several threads side by side: 80 pendulum rollouts of 2000 steps in 10 batches took
+    6.9 s one after the other and 3.5 s two at a time on 2 cores), one on an accelerator.
+    The results do not depend on it: each batch is the same program on the same inputs."""
+    if jax.default_backend() != "cpu":
+        return 1
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+    return max(1, len(cores) if cores else (os.cpu_count() or 1))
+
+
+def _in_this_threads_config(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn``, to be run by another thread under this thread's x64 mode and matmul precision
+    (JAX's context managers for them, such as the library's own precision, are per thread)."""
+    x64 = jax.config.jax_enable_x64
+    precision = jax.config.jax_default_matmul_precision
+
+    def run(*args: Any) -> Any:
+        with jax.enable_x64(x64), jax.default_matmul_precision(precision):
+            return fn(*args)
+
+    return run
 
 
 @in_full_precision
