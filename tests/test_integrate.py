@@ -4,6 +4,8 @@ Each distinct (model, scheme, shape) compiles once (seconds), so the tests share
 array shapes, and fold several resolutions into one padded, ragged batch.
 """
 
+import logging
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -273,6 +275,27 @@ def test_a_step_whose_solve_fails_is_retaken_in_substeps_when_asked():
     assert not big.ok
     with pytest.raises(mx.MetriplexError, match="retry must be an integer >= 0"):
         solve(STIFF, x1, TS_STIFF, retry=-1)
+
+
+def test_rollouts_with_and_without_retry_are_one_compiled_program(caplog):
+    # The retry's substeps are rounds of the step that the first attempt takes, and the
+    # number of substeps is traced: training's held-out rollouts (no retry) and the
+    # evaluation's (8 substeps) compile once between them, and retrying changes nothing
+    # where every step converges at once.
+    x1 = jnp.array([[1.0], [0.5]])
+    scheme = CrankNicolson(root_finder=FixedPoint())
+    ts = jnp.linspace(0.0, 0.1, 11)  # k dt = 0.05: the fixed point converges at every step
+    jax.clear_caches()  # count this test's compilations, whatever ran before in this process
+    with jax.log_compiles(), caplog.at_level(logging.WARNING, logger="jax"):
+        plain = solve(STIFF, x1, ts, scheme=scheme)
+        retried = solve(STIFF, x1, ts, scheme=scheme, retry=8)
+        failing = solve(STIFF, x1, TS_STIFF, scheme=scheme, retry=8)
+    compiled = [r.getMessage().split(" with ")[0] for r in caplog.records
+                if r.getMessage().startswith("Compiling jit(_rollout)")]
+    assert len(compiled) == 1, compiled
+    np.testing.assert_array_equal(np.asarray(plain.xs), np.asarray(retried.xs))
+    np.testing.assert_array_equal(np.asarray(plain.iterations), np.asarray(retried.iterations))
+    assert plain.ok and failing.ok  # the retried stiff steps converge in their substeps
 
 
 def test_a_root_finder_is_an_object_and_a_solver_name_is_parsed_at_the_edge():
