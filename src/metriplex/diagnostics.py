@@ -21,7 +21,6 @@ JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
@@ -39,6 +38,7 @@ from .data import Trajectories, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 from ._progress import progress_bar
+from ._threads import cpu_threads, in_this_threads_config
 from ._sensitivity import step_sensitivity as step_sensitivity
 
 _TINY = 1e-300
@@ -89,36 +89,11 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
                       leave=False) as bar:
         parts = [batch(0)]  # compiles the program the other batches run
         bar.update(len(parts[0][1]))
-        with ThreadPoolExecutor(_rollout_threads()) as pool:
-            for part in pool.map(_in_this_threads_config(batch), starts[1:]):
+        with ThreadPoolExecutor(cpu_threads()) as pool:
+            for part in pool.map(in_this_threads_config(batch), starts[1:]):
                 parts.append(part)
                 bar.update(len(part[1]))
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths
-
-
-def _rollout_threads() -> int:
-    """How many batches of rollouts run at once: one per CPU core on the CPU (each batch is
-    one compiled program whose many small operations run on one core, and JAX runs programs
-    of several threads side by side: 80 pendulum rollouts of 2000 steps in 10 batches took
-    6.9 s one after the other and 3.5 s two at a time on 2 cores), one on an accelerator.
-    The results do not depend on it: each batch is the same program on the same inputs."""
-    if jax.default_backend() != "cpu":
-        return 1
-    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
-    return max(1, len(cores) if cores else (os.cpu_count() or 1))
-
-
-def _in_this_threads_config(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """``fn``, to be run by another thread under this thread's x64 mode and matmul precision
-    (JAX's context managers for them, such as the library's own precision, are per thread)."""
-    x64 = jax.config.jax_enable_x64
-    precision = jax.config.jax_default_matmul_precision
-
-    def run(*args: Any) -> Any:
-        with jax.enable_x64(x64), jax.default_matmul_precision(precision):
-            return fn(*args)
-
-    return run
 
 
 @in_full_precision
