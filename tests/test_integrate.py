@@ -27,6 +27,7 @@ from metriplex.integrate import (
 )
 from metriplex.app.config import scheme_from_name
 from metriplex.diagnostics import rollout_data
+from metriplex.systems import Substeps
 
 
 def _rotor_energy(x):
@@ -296,6 +297,30 @@ def test_rollouts_with_and_without_retry_are_one_compiled_program(caplog):
     np.testing.assert_array_equal(np.asarray(plain.xs), np.asarray(retried.xs))
     np.testing.assert_array_equal(np.asarray(plain.iterations), np.asarray(retried.iterations))
     assert plain.ok and failing.ok  # the retried stiff steps converge in their substeps
+
+
+def test_rows_of_one_batch_retry_converge_and_wait_each_at_its_own_stage():
+    # One batch: a stiff row whose every step is retried (k dt = 5), a row whose steps
+    # converge at once (k dt = 0.05), and a padded row that takes zero steps. Each is what it
+    # would be alone: 8 substeps of the inner scheme, the plain rollout, the constant state.
+    scheme = CrankNicolson(root_finder=FixedPoint())
+    x0 = jnp.array([[1.0], [0.5], [2.0]])
+    grids = jnp.stack([TS_STIFF, jnp.linspace(0.0, 0.1, 11), jnp.zeros(11)])
+    out = solve(STIFF, x0, grids, scheme=scheme, retry=8)
+    assert out.ok
+    alone = solve(STIFF, x0[:1], grids[:1], scheme=Substeps(scheme, 8))
+    plain = solve(STIFF, x0[1:2], grids[1:2], scheme=scheme)
+    # (to the fixed point's tolerance: Substeps starts each step from another guess)
+    np.testing.assert_allclose(np.asarray(out.xs[0]), np.asarray(alone.xs[0]), rtol=1e-9,
+                               atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(out.xs[1]), np.asarray(plain.xs[0]))
+    np.testing.assert_array_equal(np.asarray(out.xs[2]), 2.0)
+    its = np.asarray(out.iterations)
+    # the retried row's first step: its failed first attempt and its 8 substeps; the padded
+    # row: nothing
+    assert its[0, 1] > np.asarray(alone.iterations)[0, 1] > 0
+    np.testing.assert_array_equal(its[1], np.asarray(plain.iterations)[0])
+    assert np.all(its[2] == 0)
 
 
 def test_a_root_finder_is_an_object_and_a_solver_name_is_parsed_at_the_edge():

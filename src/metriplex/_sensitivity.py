@@ -50,10 +50,10 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
     flips), or the data's step does not resolve the dynamics. Either way the field is not a
     trustworthy model of :math:`\dot x` between samples.
 
-    ``rollout``: what :func:`metriplex.diagnostics.rollout_data` returned for this model, data and scheme; its
-    states on the data's grid are reused, so only the refined rollout is computed. The refined
-    rollout runs as ``refine`` rollouts of that shape, one after another, so it reuses their
-    compiled program where the data's grid is all compared.
+    ``rollout``: what :func:`metriplex.diagnostics.rollout_data` returned for this model, data
+    and scheme; its states on the data's grid are reused, so only the refined rollout is
+    computed. The refined rollout runs as ``refine`` rollouts of that shape, one after
+    another, so it reuses their compiled program where the data's grid is all compared.
     """
     scheme = CrankNicolson() if scheme is None else scheme
     ts, xs, lengths = data.padded()
@@ -95,19 +95,20 @@ def _refined_rollout(model, scheme, x0, fine, w):
     """The rollout on the refined grid ``fine`` (``(B, refine (w - 1) + 1)``), as ``refine``
     rollouts of ``w`` states each, every one from the last state of the one before: the shape
     of the rollout on the data's grid, whose compiled program it reuses (for data of at most
-    ``SENSITIVITY_TRAJECTORIES`` trajectories of at most ``SENSITIVITY_STEPS`` steps, the
-    evaluation's own). Retried as the evaluation's rollouts are, so a model they complete is
-    compared here too. Returns the states (float64, NaN from a failure on) and the index of
-    the first failed state per trajectory (-1: none)."""
+    ``SENSITIVITY_TRAJECTORIES`` trajectories of equal length, at most ``SENSITIVITY_STEPS``
+    steps, the evaluation's own). Retried as the evaluation's rollouts are, so a model they
+    complete is compared here too. Returns the states (float64, NaN from a failure on) and
+    the index of the first failed state per trajectory (-1: none)."""
     dtype = float_dtype(model)
     x, failed, parts = x0, np.full(x0.shape[0], -1), [np.asarray(x0, np.float64)[:, None]]
     for k in range(0, fine.shape[1] - 1, w - 1):
-        out = solve(model, x, jnp.asarray(fine[:, k:k + w], dtype), scheme=scheme,
-                    retry=RETRY_SUBSTEPS)
+        # a failed trajectory takes zero steps (a constant grid), as in one rollout
+        grid = np.where((failed >= 0)[:, None], fine[:, k:k + 1], fine[:, k:k + w])
+        out = solve(model, x, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
         piece = np.asarray(out.failed_step)
         failed = np.where((failed < 0) & (piece >= 0), k + piece, failed)
         parts.append(np.asarray(out.xs, np.float64)[:, 1:])
-        # a failed trajectory goes on from a finite state; its states are not compared
+        # a failed trajectory stays at a finite state; its states are not compared
         x = jnp.where(jnp.asarray(failed < 0)[:, None], out.xs[:, -1], x)
     xs = np.concatenate(parts, axis=1)
     last = np.where(failed < 0, xs.shape[1], failed)

@@ -1,6 +1,6 @@
 """Work that runs beside the main thread: how many threads the CPU gives (:func:`cpu_threads`)
-and a function that carries the caller's JAX settings into another thread
-(:func:`in_this_threads_config`).
+and a function that carries the caller's JAX settings that a program depends on into another
+thread (:func:`in_this_threads_config`).
 
 JAX runs compiled programs of several threads side by side, and a rollout (many small
 operations, one step after the other) keeps one core busy: on the CPU, two batches of
@@ -27,13 +27,19 @@ def cpu_threads() -> int:
 
 
 def in_this_threads_config(fn: Callable[..., Any]) -> Callable[..., Any]:
-    """``fn``, to be run by another thread under this thread's x64 mode and matmul precision
-    (JAX's context managers for them, such as the library's own precision, are per thread)."""
+    """``fn``, to be run by another thread under this thread's JAX settings that a program
+    depends on: x64 mode, matmul precision, default device, dtype and rank promotion (JAX's
+    context managers for them, such as the library's own precision, are per thread)."""
     x64 = jax.config.jax_enable_x64
     precision = jax.config.jax_default_matmul_precision
+    device = jax.config.jax_default_device
+    dtypes = jax.config.jax_numpy_dtype_promotion
+    ranks = jax.config.jax_numpy_rank_promotion
 
     def run(*args: Any) -> Any:
-        with jax.enable_x64(x64), jax.default_matmul_precision(precision):
+        with (jax.enable_x64(x64), jax.default_matmul_precision(precision),
+              jax.default_device(device), jax.numpy_dtype_promotion(dtypes),
+              jax.numpy_rank_promotion(ranks)):
             return fn(*args)
 
     return run

@@ -21,6 +21,7 @@ JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 
 from __future__ import annotations
 
+import contextlib
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
@@ -39,6 +40,9 @@ from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
 from ._progress import progress_bar
 from ._threads import cpu_threads, in_this_threads_config
+from ._sensitivity import SENSITIVITY_REFINE as SENSITIVITY_REFINE
+from ._sensitivity import SENSITIVITY_STEPS as SENSITIVITY_STEPS
+from ._sensitivity import SENSITIVITY_TRAJECTORIES as SENSITIVITY_TRAJECTORIES
 from ._sensitivity import step_sensitivity as step_sensitivity
 
 _TINY = 1e-300
@@ -60,9 +64,9 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
 
     Returns ``(rollout, observed_xs, lengths)`` on the padded grid of :meth:`Trajectories.padded`.
     Data of more than :data:`ROLLOUT_BATCH_STATES` states are rolled out in
-    :data:`ROLLOUT_BATCHES` batches of trajectories (all of one shape, so compiled once; on the
-    CPU as many side by side as there are cores), with a progress bar when ``progress``; the
-    results are those of one call.
+    :data:`ROLLOUT_BATCHES` batches of trajectories (all of one shape, so compiled once, by the
+    first; on the CPU the others then run as many side by side as there are cores), with a
+    progress bar when ``progress``; the results are those of one call.
     """
     ts, xs, lengths = data.padded()
     dtype = float_dtype(model)
@@ -89,8 +93,10 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
                       leave=False) as bar:
         parts = [batch(0)]  # compiles the program the other batches run
         bar.update(len(parts[0][1]))
-        with ThreadPoolExecutor(cpu_threads()) as pool:
-            for part in pool.map(in_this_threads_config(batch), starts[1:]):
+        threads = cpu_threads()
+        with (ThreadPoolExecutor(threads) if threads > 1 else contextlib.nullcontext()) as pool:
+            for part in (pool.map(in_this_threads_config(batch), starts[1:]) if pool else
+                         map(batch, starts[1:])):
                 parts.append(part)
                 bar.update(len(part[1]))
     return Rollout(*(np.concatenate(p) for p in zip(*parts))), xs, lengths

@@ -107,10 +107,10 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
 
     The scheme's step appears once in the program, in a loop whose rounds are the first
     attempt and then the substeps (each row at its own stage; a row that is done takes zero
-    steps), so the retry adds no second copy of the solver to compile (an evaluation's
-    rollout compiled in 2.4 s with one, 1.3 s now; oscillator-bath model), and ``retry`` is
-    traced: the rollouts with and without it (training's held-out ones, the evaluation's) are
-    one program. A step that converges at once takes one round.
+    steps), so the retry adds no second copy of the solver to compile, and ``retry`` is
+    traced: rollouts of one shape with and without it are one program. A step that converges
+    at once takes one round; a zero step takes none (its iterations: 0), and a failed retry
+    stops counting at its failed substep.
     """
     dtype = jnp.asarray(0).dtype
 
