@@ -132,9 +132,8 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
                 its + jnp.where(active, jnp.asarray(its1, dtype), 0),
                 retrying | first_failure)
 
-    ones = jnp.ones(x.shape[:1], dtype)
-    # the first round's guess is the predictor: y + dy = guess
-    init = (x, guess - x, jnp.where(h > 0, ones, 0), h, jnp.ones(x.shape[:1], bool),
+    # one round for each row that moves; the first round's guess is the predictor (y + dy)
+    init = (x, guess - x, (h > 0).astype(dtype), h, jnp.ones(x.shape[:1], bool),
             jnp.zeros(x.shape[:1], dtype), jnp.zeros(x.shape[:1], bool))
     y, _, _, _, ok, its, _ = jax.lax.while_loop(lambda s: jnp.any(s[2] > 0), round_, init)
     return y, ok, its
