@@ -17,6 +17,7 @@ python benchmarks/zoo.py                         # every case, defaults
 python benchmarks/zoo.py --cases oscillator-bath,heat-exchange --set lr=1e-2
 python benchmarks/zoo.py --out zoo.json          # also write the rows as JSON
 python benchmarks/zoo.py --black-box             # also an unconstrained field, for comparison
+python benchmarks/zoo.py --cases thermoelastic-chain --trajectories 96   # more training data
 ```
 
 ``--black-box`` also trains, on the same training data and split, an unconstrained vector field
@@ -147,10 +148,11 @@ def black_box(train, test, config: RunConfig, horizon: float | None = None) -> d
 
 
 def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
-             with_black_box: bool = False) -> dict:
+             with_black_box: bool = False, trajectories: int | None = None) -> dict:
     system = case.system
+    trajectories = case.trajectories if trajectories is None else trajectories
     t0 = time.perf_counter()
-    train = generate(system, trajectories=case.trajectories, steps=case.steps, dt=case.dt,
+    train = generate(system, trajectories=trajectories, steps=case.steps, dt=case.dt,
                      seed=seed)
     test = generate(system, trajectories=case.test_trajectories, steps=case.horizon_steps,
                     dt=case.dt, seed=1000 + seed)
@@ -176,6 +178,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "rel_l2_standardised": std_mean,
         "failed": int(report["rollout_failures"]),
         "test_trajectories": case.test_trajectories,
+        "train_trajectories": trajectories,
         "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
         # The share of the motion that L grad E drives, learned and true: near 0 where the true
         # one is not, friction carries the motion and the learned E is not the energy.
@@ -264,6 +267,9 @@ def main(argv=None) -> int:
                    help="override a training setting (RunConfig field), e.g. lr=1e-2")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", help="also write the rows to this JSON file")
+    p.add_argument("--trajectories", type=int,
+                   help="training trajectories per case (default: each case's own; the "
+                        "validation split is taken from them)")
     p.add_argument("--black-box", action="store_true",
                    help="also train an unconstrained field on the same data, for comparison")
     args = p.parse_args(argv)
@@ -286,7 +292,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             row = run_case(case, overrides, Path(tmp), seed=args.seed,
-                           with_black_box=args.black_box)
+                           with_black_box=args.black_box, trajectories=args.trajectories)
             rows.append(row)
             print(f"  {row['system']}: rel. L2 {_fmt(row['rel_l2'])}, standardised "
                   f"{_fmt(row['rel_l2_standardised'])}, failed {row['failed']}, "
