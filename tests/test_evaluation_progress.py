@@ -168,3 +168,17 @@ def test_train_shows_progress_while_it_evaluates(files, tmp_path, monkeypatch, q
     assert ("rollouts" in res.stderr) is not quiet, res.stderr
     metrics = json.loads((tmp_path / "r" / "metrics.json").read_text())
     assert metrics["trajectory_ids"] == [1, 2, 3, 4, 5]
+
+
+def test_energy_and_entropy_in_one_pass_are_those_of_one_potential_at_a_time():
+    # The metrics and the report compute E and S together (one program to compile): the
+    # values must be the bits that each potential alone gives.
+    model = mx.GenericModel(mx.MLPPotential(3, width=8, depth=2, key=jr.key(0)),
+                            mx.MLPPotential(3, width=8, depth=2, key=jr.key(1)),
+                            mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    xs = np.random.default_rng(0).normal(size=(4, 9, 3))
+    E, S = diagnostics.energy_entropy_along(model, xs)
+    assert E.shape == S.shape == (4, 9) and E.dtype == S.dtype == np.float64
+    np.testing.assert_array_equal(E, diagnostics.potential_along(model, model.energy, xs))
+    np.testing.assert_array_equal(S, diagnostics.potential_along(model, model.entropy, xs))
+    assert not np.array_equal(E, S)

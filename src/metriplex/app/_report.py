@@ -18,7 +18,7 @@ import numpy as np
 from . import plots
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
-from ..diagnostics import error_over_time, potential_along, rollout_data
+from ..diagnostics import energy_entropy_along, error_over_time, rollout_data
 from .._progress import progress_bar
 
 if TYPE_CHECKING:
@@ -103,7 +103,7 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
                       t=tk[1:], residual=res, names=np.array(names))
     bar.update()
     # NaN after a failure: the potentials stop there too
-    E, S = (potential_along(model, fn, pred) for fn in (model.energy, model.entropy))
+    E, S = energy_entropy_along(model, pred)
     fitted = {name: v for name, v in (("energy_true_fitted", truth.energy),
                                       ("entropy_true_fitted", truth.entropy)) if v is not None}
     plots.save_figure(plots.energy_entropy(ts, E, S, E_true=truth.energy, S_true=truth.entropy,

@@ -33,7 +33,8 @@ from ..config import PRESETS, RunConfig, preset, scheme_from_name
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
-from ...diagnostics import potential_along, error_over_time, evaluate, rollout_data, time_to_error
+from ...diagnostics import (energy_entropy_along, error_over_time, evaluate, potential_along,
+                             rollout_data, time_to_error)
 from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
@@ -275,10 +276,8 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme, rollout,
     # Learned E and S against the true ones along the test trajectories, after the best
     # affine fit (only L grad E and M grad S are observed: E, S are known up to this gauge).
     x_all = np.asarray(test.x)
-    E_l = potential_along(model, model.energy, x_all)
-    S_l = potential_along(model, model.entropy, x_all)
-    E_t = potential_along(system.model, system.model.energy, x_all)
-    S_t = potential_along(system.model, system.model.entropy, x_all)
+    E_l, S_l = energy_entropy_along(model, x_all)
+    E_t, S_t = energy_entropy_along(system.model, x_all)
     result["energy_gauge_fit"] = affine_fit(E_t, E_l)
     result.update(_energy_drifts(system, model, out, xs, lengths, result["energy_gauge_fit"]))
     plots.save_figure(plots.gauge_fit(E_t, E_l, label="E"), folder / "energy_fit", true=E_t,
