@@ -1,6 +1,6 @@
 """Defaults checked on systems outside the zoo: none of them was used to choose a default.
 
-    .venv/bin/python benchmarks/outside_zoo.py                       # all four, one by one
+    .venv/bin/python benchmarks/outside_zoo.py                       # all five, one by one
     .venv/bin/python benchmarks/outside_zoo.py --cases point-vortices --out rows.json
 
 Each case is trained as `benchmarks/zoo.py` trains a zoo case (`zoo.run_case`: the structure
@@ -17,6 +17,10 @@ error the step itself makes:
   L constant and non-canonical (1/Gamma_i blocks), learned; E logarithmic; no S, no M.
 - **elastic-pendulum** (n = 4): a spring pendulum in polar coordinates (r, theta, p_r,
   p_theta); canonical L given, position-dependent kinetic energy p_theta^2 / (2 r^2).
+- **reaction-heat** (n = 4, added 2026-11-28 after the four above were run): two reactions
+  in a solution, A <=> B and B + B <=> C, with mass-action rates (one bimolecular), whose
+  released energy heats the solvent: amounts in mol (~1e-2), entropy in J/K (~100, moving by
+  ~0.1), seconds; L = 0 and S = s given, E and M learned.
 
 Results: docs/zoo.md, *Outside the zoo*.
 """
@@ -37,7 +41,8 @@ import jax.numpy as jnp  # noqa: E402
 
 import zoo  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
-from metriplex.structure import CanonicalPoisson, SumOf, ZeroFriction, ZeroPotential  # noqa: E402
+from metriplex.structure import (CanonicalPoisson, SumOf, ZeroFriction, ZeroPoisson,  # noqa: E402
+                                 ZeroPotential)
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems._base import BoxSampling, System, analytic_model  # noqa: E402
 from metriplex.systems.zoo import ZooCase  # noqa: E402
@@ -193,12 +198,87 @@ class ElasticPendulum(BoxSampling, System):
                               friction=ZeroFriction(4))
 
 
+# -- two reactions that heat their solvent -------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class ReactionConfig:
+    """Amounts N = (N_A, N_B, N_C) in mol and the solvent's entropy s in J/K.
+
+    E = sum_i N_i (e_i + a (log(N_i / n0) - 1)) + c theta0 (exp((s - s0) / c) - 1), so the
+    chemical potentials are mu_i = e_i + a log(N_i / n0) and the temperature theta =
+    theta0 exp((s - s0) / c); S = s. Reaction r of stoichiometry nu_r (A <=> B: (-1, 1, 0);
+    B + B <=> C: (0, -2, 1)) has the affinity A_r = -nu_r . mu and the mass-action rate
+    r_r = kappa_r (exp(X_r / a) - exp(Y_r / a)), X_r and Y_r the sums of n mu over its
+    reactants and products (so A_r = X_r - Y_r and r_r A_r >= 0). GENERIC with L = 0 and
+    M = sum_r (Lambda_r / theta) w_r w_r^T, w_r = (theta nu_r, A_r), Lambda_r = r_r / A_r:
+    N' = sum_r r_r nu_r, s' = sum_r r_r A_r / theta.
+    """
+
+    a: float = 2500.0
+    energies: tuple[float, float, float] = (0.0, -1250.0, -3750.0)
+    n0: float = 0.01
+    rates: tuple[float, float] = (5e-4, 3e-4)
+    heat_capacity: float = 50.0
+    theta0: float = 300.0
+    s0: float = 100.0
+    x0_center: tuple[float, float, float, float] = (0.02, 0.01, 0.006, 100.0)
+    x0_halfwidth: tuple[float, float, float, float] = (0.01, 0.008, 0.005, 0.5)
+
+
+_STOICHIOMETRY = ((-1.0, 1.0, 0.0), (0.0, -2.0, 1.0))
+
+
+def _reaction_potentials(c: ReactionConfig, x):
+    return jnp.asarray(c.energies, x.dtype) + c.a * jnp.log(x[:3] / c.n0)
+
+
+def _reaction_energy(c: ReactionConfig, x):
+    mu = _reaction_potentials(c, x)
+    chemical = jnp.sum(x[:3] * (mu - c.a))
+    return chemical + c.heat_capacity * c.theta0 * jnp.expm1((x[3] - c.s0) / c.heat_capacity)
+
+
+def _exp_ratio(y):
+    """(exp(y) - 1) / y, 1 at y = 0 (and its derivative there too)."""
+    small = jnp.abs(y) < 1e-6
+    safe = jnp.where(small, 1.0, y)
+    return jnp.where(small, 1.0 + y / 2.0, jnp.expm1(safe) / safe)
+
+
+def _reaction_friction(c: ReactionConfig, x):
+    mu = _reaction_potentials(c, x)
+    theta = c.theta0 * jnp.exp((x[3] - c.s0) / c.heat_capacity)
+    M = jnp.zeros((4, 4), x.dtype)
+    for nu, kappa in zip(_STOICHIOMETRY, c.rates):
+        nu = jnp.asarray(nu, x.dtype)
+        Y = jnp.sum(jnp.maximum(nu, 0.0) * mu)  # products
+        A = -jnp.dot(nu, mu)  # affinity, X - Y
+        lam = kappa * jnp.exp(Y / c.a) * _exp_ratio(A / c.a) / c.a  # r / A >= 0
+        w = jnp.concatenate([theta * nu, A[None]])
+        M = M + (lam / theta) * jnp.outer(w, w)
+    return M
+
+
+@dataclasses.dataclass(frozen=True)
+class ReactionHeat(BoxSampling, System):
+    name = "reaction-heat"
+    description = "two reactions (one bimolecular) whose released energy heats the solvent"
+    names = ("N_A", "N_B", "N_C", "s")
+    defaults = case_settings(dt=2.0, steps=150, trajectories=30)
+    max_substep = 0.05
+    config: ReactionConfig = ReactionConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_reaction_energy, entropy=SumOf((3,)),
+                              poisson=ZeroPoisson(4), friction=_reaction_friction)
+
+
 CASES = {c.name: c for c in (
     ZooCase.of(DoubleWellBath(), {"poisson": "canonical:1", "entropy": "sum:2"}),
     ZooCase.of(LotkaVolterra(), {"entropy": "zero", "friction": "zero"}, time_unit="yr"),
     ZooCase.of(PointVortices(), {"entropy": "zero", "friction": "zero"}),
     ZooCase.of(ElasticPendulum(), {"poisson": "canonical:2", "entropy": "zero",
                                    "friction": "zero"}),
+    ZooCase.of(ReactionHeat(), {"poisson": "zero", "entropy": "sum:3"}, time_unit="s"),
 )}
 
 

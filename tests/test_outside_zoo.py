@@ -75,3 +75,15 @@ def test_the_stated_equations():
     w = np.sum(g[None, None, :] * dx / (2 * np.pi * r2), axis=2)
     expected = np.stack([u, w], axis=2).reshape(len(x), 6)
     np.testing.assert_allclose(_field("point-vortices", x), expected, rtol=1e-10, atol=1e-12)
+
+    # Two reactions that heat the solvent: mass action with the chemical potentials
+    # mu_i = e_i + a log(N_i / n0), the released energy into s at the temperature theta.
+    x = _states("reaction-heat")
+    c = outside_zoo.ReactionConfig()
+    mu = np.asarray(c.energies) + c.a * np.log(x[:, :3] / c.n0)
+    theta = c.theta0 * np.exp((x[:, 3] - c.s0) / c.heat_capacity)
+    r1 = c.rates[0] * (np.exp(mu[:, 0] / c.a) - np.exp(mu[:, 1] / c.a))
+    r2 = c.rates[1] * (np.exp(2 * mu[:, 1] / c.a) - np.exp(mu[:, 2] / c.a))
+    a1, a2 = mu[:, 0] - mu[:, 1], 2 * mu[:, 1] - mu[:, 2]
+    expected = np.stack([-r1, r1 - 2 * r2, r2, (r1 * a1 + r2 * a2) / theta], axis=1)
+    np.testing.assert_allclose(_field("reaction-heat", x), expected, rtol=1e-9, atol=1e-15)
