@@ -1,6 +1,6 @@
 """Defaults checked on systems outside the zoo: none of them was used to choose a default.
 
-    .venv/bin/python benchmarks/outside_zoo.py                       # all five, one by one
+    .venv/bin/python benchmarks/outside_zoo.py                       # all six, one by one
     .venv/bin/python benchmarks/outside_zoo.py --cases point-vortices --out rows.json
 
 Each case is trained as `benchmarks/zoo.py` trains a zoo case (`zoo.run_case`: the structure
@@ -21,6 +21,10 @@ error the step itself makes:
   in a solution, A <=> B and B + B <=> C, with mass-action rates (one bimolecular), whose
   released energy heats the solvent: amounts in mol (~1e-2), entropy in J/K (~100, moving by
   ~0.1), seconds; L = 0 and S = s given, E and M learned.
+- **conduction-ring** (n = 8, added with reaction-heat): eight cells of different heat
+  capacities in a ring, each conducting to its two neighbours with a conductance that grows
+  with temperature; minutes, entropies offset by 5; L = 0 and S = sum of the s_i given, E
+  and M learned (the zoo's only other L = 0 case has two variables).
 
 Results: docs/zoo.md, *Outside the zoo*.
 """
@@ -272,6 +276,58 @@ class ReactionHeat(BoxSampling, System):
                               poisson=ZeroPoisson(4), friction=_reaction_friction)
 
 
+# -- a ring of heat-conducting cells ------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class RingConfig:
+    """Cells i = 0..7 of heat capacity c_i in a ring; E = sum_i c_i theta0 (exp((s_i - s0) /
+    c_i) - 1), so theta_i = theta0 exp((s_i - s0) / c_i); S = sum_i s_i. Neighbours i, j
+    exchange the heat flux kappa_ij (theta_j - theta_i) with kappa_ij = kappa sqrt(theta_i
+    theta_j) / theta0: M = sum_edges kappa_ij theta_i theta_j u u^T with u = e_i / theta_i -
+    e_j / theta_j, so s_i' = sum_j kappa_ij (theta_j - theta_i) / theta_i."""
+
+    heat_capacities: tuple[float, ...] = (1.0, 1.5, 0.8, 2.0, 1.2, 0.6, 1.8, 1.0)
+    conductance: float = 0.05
+    theta0: float = 300.0
+    s0: float = 5.0
+    x0_center: tuple[float, ...] = (5.0,) * 8
+    x0_halfwidth: tuple[float, ...] = (0.1,) * 8
+
+
+def _ring_temperatures(c: RingConfig, x):
+    return c.theta0 * jnp.exp((x - c.s0) / jnp.asarray(c.heat_capacities, x.dtype))
+
+
+def _ring_energy(c: RingConfig, x):
+    caps = jnp.asarray(c.heat_capacities, x.dtype)
+    return jnp.sum(caps * c.theta0 * jnp.expm1((x - c.s0) / caps))
+
+
+def _ring_friction(c: RingConfig, x):
+    theta = _ring_temperatures(c, x)
+    n = len(c.heat_capacities)
+    M = jnp.zeros((n, n), x.dtype)
+    for i in range(n):
+        j = (i + 1) % n
+        kappa = c.conductance * jnp.sqrt(theta[i] * theta[j]) / c.theta0
+        u = jnp.zeros(n, x.dtype).at[i].set(1.0 / theta[i]).at[j].set(-1.0 / theta[j])
+        M = M + kappa * theta[i] * theta[j] * jnp.outer(u, u)
+    return M
+
+
+@dataclasses.dataclass(frozen=True)
+class ConductionRing(BoxSampling, System):
+    name = "conduction-ring"
+    description = "eight heat-conducting cells in a ring (minutes): L = 0, n = 8"
+    names = tuple(f"s{i}" for i in range(8))
+    defaults = case_settings(dt=1.0, steps=150, trajectories=30)
+    max_substep = 0.05
+    config: RingConfig = RingConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_ring_energy, entropy=SumOf(tuple(range(8))),
+                              poisson=ZeroPoisson(8), friction=_ring_friction)
+
+
 CASES = {c.name: c for c in (
     ZooCase.of(DoubleWellBath(), {"poisson": "canonical:1", "entropy": "sum:2"}),
     ZooCase.of(LotkaVolterra(), {"entropy": "zero", "friction": "zero"}, time_unit="yr"),
@@ -279,6 +335,8 @@ CASES = {c.name: c for c in (
     ZooCase.of(ElasticPendulum(), {"poisson": "canonical:2", "entropy": "zero",
                                    "friction": "zero"}),
     ZooCase.of(ReactionHeat(), {"poisson": "zero", "entropy": "sum:3"}, time_unit="s"),
+    ZooCase.of(ConductionRing(), {"poisson": "zero", "entropy": "sum:0,1,2,3,4,5,6,7"},
+               time_unit="min"),
 )}
 
 

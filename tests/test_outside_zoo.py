@@ -87,3 +87,15 @@ def test_the_stated_equations():
     a1, a2 = mu[:, 0] - mu[:, 1], 2 * mu[:, 1] - mu[:, 2]
     expected = np.stack([-r1, r1 - 2 * r2, r2, (r1 * a1 + r2 * a2) / theta], axis=1)
     np.testing.assert_allclose(_field("reaction-heat", x), expected, rtol=1e-9, atol=1e-15)
+
+    # A ring of cells: Fourier conduction between neighbours, s_i' = sum_j k_ij (T_j - T_i) / T_i
+    # with k_ij = kappa sqrt(T_i T_j) / theta0.
+    x = _states("conduction-ring")
+    c = outside_zoo.RingConfig()
+    T = c.theta0 * np.exp((x - c.s0) / np.asarray(c.heat_capacities))
+    expected = np.zeros_like(x)
+    for i in range(8):
+        for j in ((i - 1) % 8, (i + 1) % 8):
+            k = c.conductance * np.sqrt(T[:, i] * T[:, j]) / c.theta0
+            expected[:, i] += k * (T[:, j] - T[:, i]) / T[:, i]
+    np.testing.assert_allclose(_field("conduction-ring", x), expected, rtol=1e-9, atol=1e-14)
