@@ -51,6 +51,7 @@ from metriplex.systems import generate  # noqa: E402
 from metriplex.systems._base import BoxSampling, System, analytic_model  # noqa: E402
 from metriplex.systems.zoo import ZooCase  # noqa: E402
 from metriplex.systems.zoo._case import case_settings  # noqa: E402
+from metriplex.systems.zoo._parts import bath_energy, bath_temperature  # noqa: E402
 
 
 # -- a double well whose friction heats a bath ---------------------------------------------------
@@ -238,7 +239,7 @@ def _reaction_potentials(c: ReactionConfig, x):
 def _reaction_energy(c: ReactionConfig, x):
     mu = _reaction_potentials(c, x)
     chemical = jnp.sum(x[:3] * (mu - c.a))
-    return chemical + c.heat_capacity * c.theta0 * jnp.expm1((x[3] - c.s0) / c.heat_capacity)
+    return chemical + bath_energy(x[3] - c.s0, c.heat_capacity, c.theta0)
 
 
 def _exp_ratio(y):
@@ -250,7 +251,7 @@ def _exp_ratio(y):
 
 def _reaction_friction(c: ReactionConfig, x):
     mu = _reaction_potentials(c, x)
-    theta = c.theta0 * jnp.exp((x[3] - c.s0) / c.heat_capacity)
+    theta = bath_temperature(x[3] - c.s0, c.heat_capacity, c.theta0)
     M = jnp.zeros((4, 4), x.dtype)
     for nu, kappa in zip(_STOICHIOMETRY, c.rates):
         nu = jnp.asarray(nu, x.dtype)
@@ -294,12 +295,11 @@ class RingConfig:
 
 
 def _ring_temperatures(c: RingConfig, x):
-    return c.theta0 * jnp.exp((x - c.s0) / jnp.asarray(c.heat_capacities, x.dtype))
+    return bath_temperature(x - c.s0, jnp.asarray(c.heat_capacities, x.dtype), c.theta0)
 
 
 def _ring_energy(c: RingConfig, x):
-    caps = jnp.asarray(c.heat_capacities, x.dtype)
-    return jnp.sum(caps * c.theta0 * jnp.expm1((x - c.s0) / caps))
+    return jnp.sum(bath_energy(x - c.s0, jnp.asarray(c.heat_capacities, x.dtype), c.theta0))
 
 
 def _ring_friction(c: RingConfig, x):
