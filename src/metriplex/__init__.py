@@ -54,6 +54,7 @@ from .structure import CasimirPoisson3 as CasimirPoisson3
 from .structure import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .structure import CholeskyFriction as CholeskyFriction
 from .structure import ConstantFriction as ConstantFriction
+from .structure import ExchangeFriction as ExchangeFriction
 from .structure import ConstantPoisson as ConstantPoisson
 from .structure import Confinement as Confinement
 from .structure import LiePoisson as LiePoisson

@@ -19,7 +19,8 @@ from ..io import read_matrix
 from ..structure._registry import from_spec
 from ..structure.confinement import Confinement
 from ..structure.constant import ConstantFriction, ConstantPoisson
-from ..structure.friction import CholeskyFriction, ProjectedCholeskyFriction, ZeroFriction
+from ..structure.friction import (CholeskyFriction, ExchangeFriction, ProjectedCholeskyFriction,
+                                  ZeroFriction)
 from ..structure.lie_poisson import LiePoisson
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
 from ..structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
@@ -150,6 +151,9 @@ POISSON = {
 }
 FRICTION = {
     "neural": Spelling("neural (default)", learned=_friction),
+    "exchange": Spelling("exchange (pairwise exchange between variables; M grad E = 0 exactly)",
+                         learned=lambda b: ExchangeFriction(b.n, **b.net, scaling=b.scaling,
+                                                            key=b.key)),
     "zero": Spelling("zero", given=lambda a, n: ZeroFriction(n)),
     "file": Spelling("file:PATH (a constant M from .npy, .npz or .mat)",
                      given=lambda a, n: ConstantFriction(read_matrix(a, "M", n))),

@@ -24,6 +24,10 @@ class ThermalFields(Protocol):
     confine: bool | None
 
 
+#: The ``--friction`` spellings whose M is learned.
+LEARNED_FRICTIONS = ("neural", "exchange")
+
+
 def reversible_first_on(config: ThermalFields) -> bool:
     """Whether training starts with L grad E alone (``--reversible-first``). By default (left
     out) it does when M is learned beside an L and an S that are not zero: then a friction
@@ -31,7 +35,7 @@ def reversible_first_on(config: ThermalFields) -> bool:
     motion*)."""
     if config.reversible_first is not None:
         return config.reversible_first
-    return (config.friction == "neural" and config.poisson != "zero"
+    return (config.friction in LEARNED_FRICTIONS and config.poisson != "zero"
             and config.entropy != "zero")
 
 
@@ -52,10 +56,12 @@ def check_thermal_options(config: ThermalFields) -> None:
             f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
             f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
             "leave --w-temperature out.")
-    if config.reversible_first and (config.friction != "neural" or config.poisson == "zero"):
+    if config.reversible_first and (config.friction not in LEARNED_FRICTIONS
+                                    or config.poisson == "zero"):
         raise MetriplexError(
             f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
-            f"it needs --friction neural and an L other than zero; got --friction "
+            f"it needs a learned friction (--friction neural or exchange) and an L other than "
+            f"zero; got --friction "
             f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
 
 
@@ -69,7 +75,8 @@ def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
 #: decrease in a rollout), a learned M exactly degenerate when training starts with L grad E
 #: alone (:func:`reversible_first_on`: the learned flow then conserves the learned energy) and
 #: keeps the other conditions as penalties; ``exact`` makes every
-#: learned L and M exactly degenerate; ``soft`` uses penalties only.
+#: learned L and M exactly degenerate; ``soft`` uses penalties only. ``--friction exchange``
+#: builds M exactly degenerate in every mode (``structure.ExchangeFriction``).
 DEGENERACY_MODES = ("auto", "soft", "exact")
 
 
@@ -77,6 +84,9 @@ def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
     if config.degeneracy == "exact":
         return True, True
+    if config.friction == "exchange":  # exactly degenerate by construction
+        return config.degeneracy != "soft" and config.poisson == "neural" and option(
+            config.entropy).kind == "sum", True
     if config.degeneracy == "soft":
         return False, False
     return (config.poisson == "neural" and option(config.entropy).kind == "sum",
@@ -91,5 +101,5 @@ def confine_on(config: ThermalFields) -> bool:
     margin were measured to lose accuracy to it (docs/zoo.md)."""
     if config.confine is not None:
         return config.confine
-    return (option(config.entropy).kind == "sum" and config.friction == "neural"
+    return (option(config.entropy).kind == "sum" and config.friction in LEARNED_FRICTIONS
             and exact_blocks(config)[1])

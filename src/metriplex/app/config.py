@@ -300,6 +300,11 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
             f"--features-for lists the networks that see the features, from "
             f"{', '.join(FEATURE_BLOCKS)}; got {config.features_for!r}.{hint}"
         )
+    if "friction" in blocks and config.friction == "exchange" and config.features != "none":
+        raise MetriplexError(
+            f"--friction exchange builds M from the energy's gradient by variable pairs, and its "
+            f"rates read the state, not features; got --features {config.features} "
+            f"--features-for {config.features_for}. Leave friction out of --features-for.")
     return blocks
 
 

@@ -7,6 +7,7 @@ from .confinement import Confinement as Confinement
 from .constant import ConstantFriction as ConstantFriction
 from .constant import ConstantPoisson as ConstantPoisson
 from .friction import CholeskyFriction as CholeskyFriction
+from .friction import ExchangeFriction as ExchangeFriction
 from .friction import KnownFriction as KnownFriction
 from .friction import ProjectedCholeskyFriction as ProjectedCholeskyFriction
 from .friction import ZeroFriction as ZeroFriction

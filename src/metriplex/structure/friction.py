@@ -20,7 +20,7 @@ from ._mlp import folded_network, network_spec, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
-from ._projection import AbstractProjected
+from ._projection import AbstractProjected, check_eps, default_eps
 from .potential import FeatureMap
 from .scaling import Scaling, scaling_spec, standardise_state
 
@@ -178,3 +178,74 @@ class ProjectedCholeskyFriction(AbstractProjected, AbstractFriction):
     def __call__(self, x: State, grad_energy: State) -> Matrix:
         F = self.factor(x, grad_energy)
         return F @ F.T
+
+
+@register("friction", "exchange")
+class ExchangeFriction(AbstractFriction):
+    r"""Learned pairwise exchange: :math:`M\nabla E = 0` and :math:`M \succeq 0` by construction,
+
+    .. math:: M(x) = f\,D\Big[\sum_{i<j} w_{ij}(x)\,\zeta_{ij}\zeta_{ij}^\top\Big]D,\qquad
+              \zeta_{ij} = \frac{h_j e_i - h_i e_j}{\sqrt{|h|^2 + \varepsilon^2}},\quad
+              h = D\nabla E,
+
+    with :math:`w_{ij} = a_{ij}(x)^2 \ge 0` from a network of :math:`n(n-1)/2` outputs (``f`` and
+    ``D`` those of the scaling). Each term moves one conserved quantity between the variables
+    :math:`i` and :math:`j` at the rate that keeps :math:`E` fixed: heat conducted between two
+    cells, momentum damped into a bath. Since :math:`\zeta_{ij}\cdot h = 0`, :math:`M\nabla E`
+    vanishes to rounding at every state; :math:`M \to 0` smoothly where :math:`\nabla E \to 0`.
+
+    Entries: :math:`\tilde M_{ii} = \sum_j w_{ij}h_j^2/s`, :math:`\tilde M_{ij} = -w_{ij}h_ih_j/s`
+    (:math:`s = |h|^2 + \varepsilon^2`), assembled in :math:`O(n^2)`.
+    """
+
+    hidden: Hidden
+    head: eqx.nn.Linear
+    n: int = eqx.field(static=True)
+    scaling: Scaling | None = eqx.field(static=True)
+    eps: float | None = eqx.field(static=True)
+
+    def __init__(self, n: int, *, width: int = WIDTH, depth: int = DEPTH,
+                 activation: str = ACTIVATION, scaling: Scaling | None = None,
+                 eps: float | None = None, key: jax.Array) -> None:
+        check_variables(n, 2, "an exchange friction", "It moves E between pairs of variables; "
+                        "with one variable use CholeskyFriction (--friction neural).")
+        check_eps(eps)
+        self.n = n
+        self.scaling = scaling
+        self.eps = None if eps is None else float(eps)
+        hkey, okey = jax.random.split(key)
+        self.hidden = Hidden(n, width, depth, activation, key=hkey)
+        head = eqx.nn.Linear(width, n * (n - 1) // 2, key=okey)
+        # Small initial rates, as CholeskyFriction's 0.1-scaled factor.
+        self.head = eqx.tree_at(lambda l: (l.weight, l.bias), head,
+                                (0.1 * head.weight, 0.1 * head.bias))
+
+    def rates(self, x: State) -> Matrix:
+        r"""The symmetric, zero-diagonal matrix of the exchange rates :math:`w_{ij}(x) \ge 0`."""
+        a = self.head(self.hidden(standardise_state(x, self.scaling)))
+        i, j = np.triu_indices(self.n, 1)
+        W = jnp.zeros((self.n, self.n), a.dtype).at[i, j].set(a * a)
+        return W + W.T
+
+    uses_gradient: ClassVar[bool] = True
+
+    def __call__(self, x: State, grad_energy: State) -> Matrix:
+        W = self.rates(x)
+        d = (jnp.ones(self.n, x.dtype) if self.scaling is None
+             else jnp.asarray(self.scaling.scale, x.dtype))
+        h = d * grad_energy
+        e2 = max(default_eps(self.eps, x.dtype) ** 2, float(jnp.finfo(x.dtype).tiny))
+        s = jnp.sum(h * h) + jnp.asarray(e2, x.dtype)
+        Mt = (jnp.diag(W @ (h * h)) - W * jnp.outer(h, h)) / s
+        f = 1.0 if self.scaling is None else self.scaling.factor
+        return f * (d[:, None] * Mt * d[None, :])
+
+    def spec(self) -> dict[str, Any]:
+        return network_spec("exchange", self.hidden, scaling=scaling_spec(self.scaling),
+                            eps=self.eps)
+
+    @classmethod
+    def from_spec(cls, spec: dict[str, Any], n: int, *, key: jax.Array) -> "ExchangeFriction":
+        """The block that ``spec`` (the output of :meth:`spec`) describes, for ``n`` variables;
+        ``key`` draws weights that the model file then overwrites."""
+        return cls(n, **network_kwargs(spec), eps=spec.get("eps"), key=key)
