@@ -9,6 +9,7 @@ from typing import Protocol
 
 from .._errors import MetriplexError
 from ._option import entropy_variables as _sum_indices, option
+from ._spellings import FRICTION
 
 
 class ThermalFields(Protocol):
@@ -24,8 +25,8 @@ class ThermalFields(Protocol):
     confine: bool | None
 
 
-#: The ``--friction`` spellings whose M is learned.
-LEARNED_FRICTIONS = ("neural", "exchange")
+#: The ``--friction`` spellings whose M is learned (those of the spelling table that learn).
+LEARNED_FRICTIONS = tuple(k for k, v in FRICTION.items() if v.learned)
 
 
 def reversible_first_on(config: ThermalFields) -> bool:
