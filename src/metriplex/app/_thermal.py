@@ -61,8 +61,8 @@ def check_thermal_options(config: ThermalFields) -> None:
                                     or config.poisson == "zero"):
         raise MetriplexError(
             f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
-            f"it needs a learned friction (--friction neural or exchange) and an L other than "
-            f"zero; got --friction "
+            f"it needs a learned friction (--friction {' or '.join(LEARNED_FRICTIONS)}) and an L "
+            f"other than zero; got --friction "
             f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
 
 
@@ -85,13 +85,11 @@ def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
     if config.degeneracy == "exact":
         return True, True
-    if config.friction == "exchange":  # exactly degenerate by construction
-        return config.degeneracy != "soft" and config.poisson == "neural" and option(
-            config.entropy).kind == "sum", True
+    exchange = config.friction == "exchange"  # exactly degenerate by construction, in any mode
     if config.degeneracy == "soft":
-        return False, False
+        return False, exchange
     return (config.poisson == "neural" and option(config.entropy).kind == "sum",
-            config.friction == "neural" and reversible_first_on(config))
+            exchange or (config.friction == "neural" and reversible_first_on(config)))
 
 
 def confine_on(config: ThermalFields) -> bool:
