@@ -26,7 +26,8 @@ def test_every_exported_block_states_whether_it_uses_the_gradient(base):
     # it (masked) to the block they wrap; all others must not claim to.
     expected = ({"ProjectedSkewMLPPoisson", "EntropyCasimirPoisson3", "MaskedPoisson"}
                 if base is st.AbstractPoisson
-                else {"ProjectedCholeskyFriction", "ExchangeFriction", "MaskedFriction"})
+                else {"ProjectedCholeskyFriction", "ExchangeFriction", "LocalFriction",
+                      "MaskedFriction"})
     assert exact == expected
 
 

@@ -58,6 +58,9 @@ from .structure import ExchangeFriction as ExchangeFriction
 from .structure import ConstantPoisson as ConstantPoisson
 from .structure import Confinement as Confinement
 from .structure import LiePoisson as LiePoisson
+from .structure import Lattice as Lattice
+from .structure import LocalFriction as LocalFriction
+from .structure import LocalPotential as LocalPotential
 from .structure import MaskedFriction as MaskedFriction
 from .structure import MaskedPoisson as MaskedPoisson
 from .structure import FeatureMap as FeatureMap

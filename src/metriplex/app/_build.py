@@ -50,6 +50,7 @@ from ..losses import (
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.confinement import Confinement
 from ..structure.potential import FeatureMap
+from ._option import option
 from ._spellings import Learn
 from ..train import Average, Plateau
 
@@ -98,7 +99,8 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     energy = _spelling(config.energy, "--energy").learned(Learn(
         n, net, x, kE, output_scale=units.energy, features=feats["energy"],
         quadratic=bool(config.quadratic),
-        confinement=Confinement.around(x) if confine_on(config) else None))
+        confinement=Confinement.around(x) if confine_on(config) else None,
+        argument=option(config.energy).argument))
     poisson, entropy, friction = given
     if entropy is None:
         free = casimir_variables(config, poisson)
@@ -113,7 +115,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     if friction is None:
         friction = _spelling(config.friction, "--friction").learned(Learn(
             n, net, x, kM, scaling=units.friction_scaling(), exact=exact_M,
-            features=feats["friction"]))
+            features=feats["friction"], argument=option(config.friction).argument))
     constant = constant_variables(config, data) if constant is None else constant
     if constant:
         if _spelling(config.poisson, "--poisson").learned:

@@ -22,6 +22,7 @@ from ..structure.constant import ConstantFriction, ConstantPoisson
 from ..structure.friction import (CholeskyFriction, ExchangeFriction, ProjectedCholeskyFriction,
                                   ZeroFriction)
 from ..structure.lie_poisson import LiePoisson
+from ..structure.local import Lattice, LocalFriction, LocalPotential
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
 from ..structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
 from ..structure.scaling import Scaling
@@ -31,8 +32,9 @@ class Learn(NamedTuple):
     """What a learned block is made from: ``n`` variables, the network's ``net`` settings
     (width, depth, activation), the training states ``x``, the block's own scales
     (``output_scale`` of a potential, ``scaling`` of L or M), whether its degeneracy is
-    ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, and its
-    PRNG ``key``."""
+    ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, its
+    PRNG ``key``, and the option's ``argument`` (the text after the colon, e.g. ``10`` of
+    ``local:10``)."""
 
     n: int
     net: dict[str, Any]
@@ -44,6 +46,7 @@ class Learn(NamedTuple):
     features: FeatureMap | None = None
     quadratic: bool = False
     confinement: Confinement | None = None
+    argument: str = ""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,12 +54,12 @@ class Spelling:
     """One value of a structure option. ``help``: what ``--help`` lists. A block the user
     gives has ``given(argument, n)``, which checks the text after the colon against data with
     ``n`` variables and makes the block; a learned one has ``learned(Learn)`` and, where it
-    fits only some data, ``check(n)``."""
+    fits only some data or takes an argument, ``check(argument, n)``."""
 
     help: str
     given: Callable[[str, int], Any] | None = None
     learned: Callable[[Learn], Any] | None = None
-    check: Callable[[int], None] | None = None
+    check: Callable[[str, int], None] | None = None
 
 
 def indices(text: str, n: int, option: str) -> tuple[int, ...]:
@@ -103,7 +106,7 @@ def _canonical(argument: str, n: int) -> CanonicalPoisson:
     return CanonicalPoisson(n, K)
 
 
-def _three(n: int) -> None:
+def _three(argument: str, n: int) -> None:
     if n != 3:
         raise MetriplexError(f"--poisson casimir3 is for 3 state variables; the data have {n}.")
 
@@ -125,12 +128,54 @@ def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
     return make
 
 
+def lattice(argument: str, n: int, option: str) -> Lattice:
+    """The :class:`~metriplex.structure.Lattice` of ``option``'s ``local:CELLS[,periodic]``."""
+    cells, _, ring = argument.partition(",")
+    if ring.strip() not in ("", "periodic"):
+        raise MetriplexError(
+            f"{option} local:CELLS takes the number of cells and, for a ring, ',periodic'; got "
+            f"'local:{argument}'. Example: local:10 or local:8,periodic.")
+    try:
+        count = int(cells)
+    except ValueError:
+        raise MetriplexError(
+            f"{option} local:CELLS needs an integer number of cells (the state holds the same "
+            f"fields in every cell, stored field by field); got 'local:{argument}'. Example: "
+            "local:10.") from None
+    return Lattice(count, n, periodic=ring.strip() == "periodic")
+
+
+def _local_energy(b: Learn) -> LocalPotential:
+    if b.features is not None or b.quadratic:
+        raise MetriplexError(
+            "--energy local reads each bond's own variables: it takes neither --features for "
+            "the energy nor --quadratic. Leave those out, or use --energy neural.")
+    return LocalPotential(lattice(b.argument, b.n, "--energy"), data=b.x,
+                          output_scale=b.output_scale, confinement=b.confinement, key=b.key,
+                          **b.net)
+
+
+def _local_friction(b: Learn) -> LocalFriction:
+    if b.features is not None:
+        raise MetriplexError(
+            "--friction local reads each bond's own variables, not features: leave friction "
+            "out of --features-for, or use --friction neural.")
+    return LocalFriction(lattice(b.argument, b.n, "--friction"), scaling=b.scaling, key=b.key,
+                         **b.net)
+
+
 def _friction(b: Learn) -> CholeskyFriction | ProjectedCholeskyFriction:
     cls = ProjectedCholeskyFriction if b.exact else CholeskyFriction
     return cls(b.n, **b.net, scaling=b.scaling, features=b.features, data=b.x, key=b.key)
 
 
-ENERGY = {"neural": Spelling("neural (default)", learned=_potential)}
+LOCAL_HELP = ("local:CELLS[,periodic] (a sum of terms over neighbouring cells; the state "
+              "holds the same fields in every cell, stored field by field)")
+ENERGY = {
+    "neural": Spelling("neural (default)", learned=_potential),
+    "local": Spelling(LOCAL_HELP, learned=_local_energy,
+                      check=lambda a, n: lattice(a, n, "--energy") and None),
+}
 ENTROPY = {
     "neural": Spelling("neural (default)", learned=_potential),
     "sum": Spelling("sum:I,J,... (S = sum of those components, counted from 0)",
@@ -154,6 +199,9 @@ FRICTION = {
     "exchange": Spelling("exchange (pairwise exchange between variables; M grad E = 0 exactly)",
                          learned=lambda b: ExchangeFriction(b.n, **b.net, scaling=b.scaling,
                                                             key=b.key)),
+    "local": Spelling(LOCAL_HELP.replace("a sum", "M grad E = 0 exactly; a sum"),
+                      learned=_local_friction,
+                      check=lambda a, n: lattice(a, n, "--friction") and None),
     "zero": Spelling("zero", given=lambda a, n: ZeroFriction(n)),
     "file": Spelling("file:PATH (a constant M from .npy, .npz or .mat)",
                      given=lambda a, n: ConstantFriction(read_matrix(a, "M", n))),

@@ -27,6 +27,8 @@ class ThermalFields(Protocol):
 
 #: The ``--friction`` spellings whose M is learned (those of the spelling table that learn).
 LEARNED_FRICTIONS = tuple(k for k, v in FRICTION.items() if v.learned)
+#: The learned frictions built with M grad E = 0 exact whatever ``--degeneracy`` says.
+EXACT_FRICTIONS = ("exchange", "local")
 
 
 def reversible_first_on(config: ThermalFields) -> bool:
@@ -36,7 +38,7 @@ def reversible_first_on(config: ThermalFields) -> bool:
     motion*)."""
     if config.reversible_first is not None:
         return config.reversible_first
-    return (config.friction in LEARNED_FRICTIONS and config.poisson != "zero"
+    return (option(config.friction).kind in LEARNED_FRICTIONS and config.poisson != "zero"
             and config.entropy != "zero")
 
 
@@ -57,7 +59,7 @@ def check_thermal_options(config: ThermalFields) -> None:
             f"--w-temperature penalises negative temperatures dE/ds_i, so it needs the entropy "
             f"variables, --entropy sum:I,J,...; got --entropy {config.entropy}. Name them, or "
             "leave --w-temperature out.")
-    if config.reversible_first and (config.friction not in LEARNED_FRICTIONS
+    if config.reversible_first and (option(config.friction).kind not in LEARNED_FRICTIONS
                                     or config.poisson == "zero"):
         raise MetriplexError(
             f"--reversible-first first trains L grad E alone, then adds the learned friction, so "
@@ -77,7 +79,8 @@ def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
 #: alone (:func:`reversible_first_on`: the learned flow then conserves the learned energy) and
 #: keeps the other conditions as penalties; ``exact`` makes every
 #: learned L and M exactly degenerate; ``soft`` uses penalties only. ``--friction exchange``
-#: builds M exactly degenerate in every mode (``structure.ExchangeFriction``).
+#: and ``--friction local:CELLS`` build M exactly degenerate in every mode
+#: (``structure.ExchangeFriction``, ``structure.LocalFriction``).
 DEGENERACY_MODES = ("auto", "soft", "exact")
 
 
@@ -85,7 +88,8 @@ def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
     if config.degeneracy == "exact":
         return True, True
-    exchange = config.friction == "exchange"  # exactly degenerate by construction, in any mode
+    # exactly degenerate by construction, in any mode
+    exchange = option(config.friction).kind in EXACT_FRICTIONS
     if config.degeneracy == "soft":
         return False, exchange
     return (config.poisson == "neural" and option(config.entropy).kind == "sum",
@@ -100,5 +104,5 @@ def confine_on(config: ThermalFields) -> bool:
     margin were measured to lose accuracy to it (docs/zoo.md)."""
     if config.confine is not None:
         return config.confine
-    return (option(config.entropy).kind == "sum" and config.friction in LEARNED_FRICTIONS
-            and exact_blocks(config)[1])
+    return (option(config.entropy).kind == "sum"
+            and option(config.friction).kind in LEARNED_FRICTIONS and exact_blocks(config)[1])

@@ -176,7 +176,7 @@ def validate(config: RunConfig, n: int) -> None:
         if spelling.given is not None:
             spelling.given(option(value).argument, n)  # its checks (a file: its matrix)
         elif spelling.check is not None:
-            spelling.check(n)
+            spelling.check(option(value).argument, n)
     if config.constant not in ("auto", "none"):
         _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
@@ -300,11 +300,19 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
             f"--features-for lists the networks that see the features, from "
             f"{', '.join(FEATURE_BLOCKS)}; got {config.features_for!r}.{hint}"
         )
-    if "friction" in blocks and config.friction == "exchange" and config.features != "none":
+    if config.features == "none":
+        return blocks
+    if "friction" in blocks and option(config.friction).kind == "exchange":
         raise MetriplexError(
             f"--friction exchange builds M from the energy's gradient by variable pairs, and its "
             f"rates read the state, not features; got --features {config.features} "
             f"--features-for {config.features_for}. Leave friction out of --features-for.")
+    for block, value in (("energy", config.energy), ("friction", config.friction)):
+        if block in blocks and option(value).kind == "local":
+            raise MetriplexError(
+                f"--{block} local reads each bond's own variables, not features; got --features "
+                f"{config.features} --features-for {config.features_for}. Leave {block} out "
+                "of --features-for.")
     return blocks
 
 

@@ -15,6 +15,9 @@ from .poisson import CanonicalPoisson as CanonicalPoisson
 from .casimir import CasimirPoisson3 as CasimirPoisson3
 from .casimir import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .lie_poisson import LiePoisson as LiePoisson
+from .local import Lattice as Lattice
+from .local import LocalFriction as LocalFriction
+from .local import LocalPotential as LocalPotential
 from ._mlp import ACTIVATION as ACTIVATION
 from ._mlp import ACTIVATIONS as ACTIVATIONS
 from .masked import MaskedFriction as MaskedFriction
