@@ -132,7 +132,7 @@ def test_train_refuses_to_overwrite_a_run(oscillator_run):
         (["--entropy", "sum:12"], r"indices must lie in \[0, 2\] .* got \[12\]"),
         (["--entropy", "sum:a"], r"comma-separated integer indices"),
         (["--friction", "learned"],
-         r"--friction must be one of neural, exchange, zero, file; got 'learned'"),
+         r"--friction must be one of neural, exchange, local, zero, file; got 'learned'"),
         (["--jacobi", "maybe"], r"--jacobi must be one of none, exact, stochastic"),
         (["--lr", "-1"], r"--lr must be > 0; got -1"),
         (["--validation", "1.5"], r"--validation must lie in \[0, 1\); got 1.5"),

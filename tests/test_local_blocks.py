@@ -69,10 +69,12 @@ def test_the_local_energy_is_a_sum_of_bond_terms():
     assert float(jnp.max(jnp.abs(jax.hessian(ring)(x)[np.ix_(_cell(0), _cell(3))]))) > 0.0
 
 
+@pytest.mark.parametrize("shared", [False, True], ids=["own", "shared"])
 @pytest.mark.parametrize("scaling", [None, SCALING], ids=["identity", "scaled"])
 @pytest.mark.parametrize("periodic", [False, True], ids=["open", "ring"])
-def test_the_local_friction_is_symmetric_psd_degenerate_and_local(scaling, periodic):
-    M = LocalFriction(Lattice(CELLS, N, periodic), width=8, scaling=scaling, key=jr.key(3))
+def test_the_local_friction_is_symmetric_psd_degenerate_and_local(scaling, periodic, shared):
+    M = LocalFriction(Lattice(CELLS, N, periodic, shared), width=8, scaling=scaling,
+                      key=jr.key(3))
     xs, gs = _states(100, 4), jr.normal(jr.key(5), (100, N))
     F = eqx.filter_jit(jax.vmap(M))(xs, gs)
     top = float(jnp.max(jnp.abs(F)))
@@ -85,6 +87,22 @@ def test_the_local_friction_is_symmetric_psd_degenerate_and_local(scaling, perio
     assert float(jnp.max(jnp.abs(far))) == 0.0
     ends = float(jnp.max(jnp.abs(F[:, _cell(0)][:, :, _cell(CELLS - 1)])))
     assert (ends > 0.0) == periodic
+
+
+def test_a_shared_ring_is_the_same_however_its_cells_are_numbered():
+    lat = Lattice(CELLS, N, periodic=True, shared=True)
+    E = LocalPotential(lat, width=8, key=jr.key(11))
+    M = LocalFriction(lat, width=8, key=jr.key(12))
+    x, g = _states(1, 13)[0], jr.normal(jr.key(14), (N,))
+    # moving every cell one place along the ring permutes the variables
+    perm = np.concatenate([np.roll(np.arange(CELLS), 1) + f * CELLS for f in range(FIELDS)])
+    np.testing.assert_allclose(E(x[perm]), E(x), rtol=1e-13)
+    np.testing.assert_allclose(M(x[perm], g[perm]), M(x, g)[np.ix_(perm, perm)],
+                               rtol=1e-12, atol=1e-15)
+    # one network, not one per bond; an open chain's also reads the two outside flags
+    assert E.nets.hidden.layers[0].weight.shape == (8, 2 * FIELDS)
+    open_chain = LocalPotential(Lattice(CELLS, N, shared=True), width=8, key=jr.key(11))
+    assert open_chain.nets.hidden.layers[0].weight.shape == (8, 2 * FIELDS + 2)
 
 
 def test_no_nan_where_the_energy_gradient_vanishes():
@@ -106,8 +124,8 @@ def test_local_blocks_round_trip_a_model_file(tmp_path):
                               data=_states(30, 10), output_scale=2.5, key=k[0]),
         entropy=mx.SumOf(_cell(0)[2:] + _cell(1)[2:]),
         poisson=mx.ZeroPoisson(N),
-        friction=LocalFriction(Lattice(CELLS, N, True), width=8, scaling=SCALING, eps=1e-7,
-                               key=k[1]),
+        friction=LocalFriction(Lattice(CELLS, N, shared=True), width=8, scaling=SCALING,
+                               eps=1e-7, key=k[1]),
     )
     path = tmp_path / "local.mpx"
     mx.save(path, model, n=N)
@@ -145,7 +163,7 @@ def test_the_command_line_spelling_is_checked_and_exact():
         validate(replace(cfg, energy="local:4"), 9)
     with pytest.raises(mx.MetriplexError, match="integer number of cells.*local:three"):
         validate(replace(cfg, friction="local:three"), 9)
-    with pytest.raises(mx.MetriplexError, match="periodic.*local:3,ring"):
+    with pytest.raises(mx.MetriplexError, match="periodic.*shared.*local:3,ring"):
         validate(replace(cfg, friction="local:3,ring"), 9)
     with pytest.raises(mx.MetriplexError, match="--energy local reads .* Leave energy out"):
         validate(RunConfig(energy="local:5", features="pendulum", features_for="energy"), 10)

@@ -129,12 +129,15 @@ def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
 
 
 def lattice(argument: str, n: int, option: str) -> Lattice:
-    """The :class:`~metriplex.structure.Lattice` of ``option``'s ``local:CELLS[,periodic]``."""
-    cells, _, ring = argument.partition(",")
-    if ring.strip() not in ("", "periodic"):
+    """The :class:`~metriplex.structure.Lattice` of ``option``'s
+    ``local:CELLS[,periodic][,shared]``."""
+    cells, *words = [w.strip() for w in argument.split(",")]
+    bad = [w for w in words if w not in ("periodic", "shared")]
+    if bad or len(set(words)) != len(words):
         raise MetriplexError(
-            f"{option} local:CELLS takes the number of cells and, for a ring, ',periodic'; got "
-            f"'local:{argument}'. Example: local:10 or local:8,periodic.")
+            f"{option} local:CELLS takes the number of cells, then ',periodic' for a ring and "
+            f"',shared' for cells that are alike (one network for every bond); got "
+            f"'local:{argument}'. Example: local:10 or local:8,periodic,shared.")
     try:
         count = int(cells)
     except ValueError:
@@ -142,7 +145,7 @@ def lattice(argument: str, n: int, option: str) -> Lattice:
             f"{option} local:CELLS needs an integer number of cells (the state holds the same "
             f"fields in every cell, stored field by field); got 'local:{argument}'. Example: "
             "local:10.") from None
-    return Lattice(count, n, periodic=ring.strip() == "periodic")
+    return Lattice(count, n, periodic="periodic" in words, shared="shared" in words)
 
 
 def _local_energy(b: Learn) -> LocalPotential:
@@ -169,8 +172,9 @@ def _friction(b: Learn) -> CholeskyFriction | ProjectedCholeskyFriction:
     return cls(b.n, **b.net, scaling=b.scaling, features=b.features, data=b.x, key=b.key)
 
 
-LOCAL_HELP = ("local:CELLS[,periodic] (a sum of terms over neighbouring cells; the state "
-              "holds the same fields in every cell, stored field by field)")
+LOCAL_HELP = ("local:CELLS[,periodic][,shared] (a sum of terms over neighbouring cells, "
+              "one network per bond or, shared, one for all; the state holds the same fields "
+              "in every cell, stored field by field)")
 ENERGY = {
     "neural": Spelling("neural (default)", learned=_potential),
     "local": Spelling(LOCAL_HELP, learned=_local_energy,

@@ -7,7 +7,7 @@ chain's :math:`(q_1..q_N, p_1..p_N, s_1..s_N)`, so that cell :math:`i` holds the
 :math:`i, i + N, i + 2N, \dots` The bonds join neighbouring cells, :math:`(i, i+1)`; in a ring
 (``periodic``) also :math:`(N, 1)`; in an open chain the two end cells each have one more bond,
 to the outside (a wall, or nothing), whose missing cell reads as zeros. Every bond has its own
-network (nothing assumes the cells alike).
+network (nothing assumes the cells alike), or, with ``shared``, one network serves them all.
 
 - :class:`LocalPotential`: :math:`E(x) = \sigma\sum_b \varphi_b(x_b)`, :math:`x_b` the
   standardised variables of bond :math:`b`'s two cells.
@@ -48,11 +48,14 @@ if TYPE_CHECKING:
 @dataclasses.dataclass(frozen=True)
 class Lattice:
     """``cells`` cells of ``n // cells`` fields each, stored field by field; ``periodic``: a
-    ring (the last cell bonds to the first) instead of an open chain."""
+    ring (the last cell bonds to the first) instead of an open chain; ``shared``: the cells
+    are alike, and one network serves every bond (in an open chain it also reads whether
+    each side of the bond is outside), so that each sees the data of all bonds."""
 
     cells: int
     n: int
     periodic: bool = False
+    shared: bool = False
 
     def __post_init__(self) -> None:
         expect_integer(self.cells, what="a lattice's cells", least=2,
@@ -81,12 +84,13 @@ class Lattice:
 
     def to_json(self) -> dict[str, Any]:
         """What a block's spec records of the lattice (``n`` is the model's)."""
-        return {"cells": self.cells, "periodic": self.periodic}
+        return {"cells": self.cells, "periodic": self.periodic, "shared": self.shared}
 
     @classmethod
     def from_json(cls, obj: dict[str, Any], n: int) -> "Lattice":
         """The lattice that :meth:`to_json` wrote, for a state of ``n`` variables."""
-        return cls(int(obj["cells"]), n, bool(obj.get("periodic", False)))
+        return cls(int(obj["cells"]), n, bool(obj.get("periodic", False)),
+                   bool(obj.get("shared", False)))
 
 
 @functools.lru_cache(maxsize=None)
@@ -104,14 +108,18 @@ def _selection(cells: int, n: int, periodic: bool) -> np.ndarray:
 
 
 class _Bonds(eqx.Module):
-    """One MLP per bond, ``2 fields -> width^depth -> out``, stored stacked (leading axis: the
-    bond) and evaluated in one vmap."""
+    """The bond networks, ``2 fields -> width^depth -> out``: one per bond, stored stacked
+    (leading axis: the bond) and evaluated in one vmap; or, for a ``shared`` lattice, one for
+    all bonds, which in an open chain also reads two flags, whether each side is outside."""
 
     hidden: Hidden
     out: eqx.nn.Linear
+    lattice: Lattice = eqx.field(static=True)
 
-    def __init__(self, bonds: int, in_size: int, out_size: int, *, width: int, depth: int,
+    def __init__(self, lattice: Lattice, out_size: int, *, width: int, depth: int,
                  activation: str, init_scale: float, key: jax.Array) -> None:
+        in_size = 2 * lattice.fields + (2 if lattice.shared and not lattice.periodic else 0)
+
         def make(k: jax.Array) -> tuple[Hidden, eqx.nn.Linear]:
             hk, ok = jr.split(k)
             out = eqx.nn.Linear(width, out_size, key=ok)
@@ -119,10 +127,18 @@ class _Bonds(eqx.Module):
                               (init_scale * out.weight, init_scale * out.bias))
             return Hidden(in_size, width, depth, activation, key=hk), out
 
-        self.hidden, self.out = eqx.filter_vmap(make)(jr.split(key, bonds))
+        self.lattice = lattice
+        self.hidden, self.out = (make(key) if lattice.shared
+                                 else eqx.filter_vmap(make)(jr.split(key, lattice.bonds)))
 
     def __call__(self, z: Float[Array, "bonds inputs"]) -> Float[Array, "bonds outputs"]:
-        return eqx.filter_vmap(lambda h, o, zb: o(h(zb)))(self.hidden, self.out, z)
+        if not self.lattice.shared:
+            return eqx.filter_vmap(lambda h, o, zb: o(h(zb)))(self.hidden, self.out, z)
+        if not self.lattice.periodic:
+            outside = np.zeros((self.lattice.bonds, 2))
+            outside[0, 0] = outside[-1, 1] = 1.0
+            z = jnp.concatenate([z, jnp.asarray(outside, z.dtype)], axis=1)
+        return jax.vmap(lambda zb: self.out(self.hidden(zb)))(z)
 
 
 def _windows(S: np.ndarray, z: State) -> Float[Array, "bonds variables"]:
@@ -161,7 +177,7 @@ class LocalPotential(AbstractPotential):
         self.scale = None if scale is None else tuple(float(v) for v in scale)
         self.output_scale = float(output_scale)
         self.confinement = confinement
-        self.nets = _Bonds(lattice.bonds, 2 * lattice.fields, 1, width=width, depth=depth,
+        self.nets = _Bonds(lattice, 1, width=width, depth=depth,
                            activation=activation, init_scale=1.0, key=key)
 
     def __call__(self, x: State) -> Scalar:
@@ -220,7 +236,7 @@ class LocalFriction(AbstractFriction):
         self.eps = None if eps is None else float(eps)
         w = 2 * lattice.fields
         # Small initial factors, as CholeskyFriction's: training starts near reversible motion.
-        self.nets = _Bonds(lattice.bonds, w, w * (w + 1) // 2, width=width, depth=depth,
+        self.nets = _Bonds(lattice, w * (w + 1) // 2, width=width, depth=depth,
                            activation=activation, init_scale=0.1, key=key)
 
     uses_gradient: ClassVar[bool] = True
