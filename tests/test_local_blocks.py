@@ -105,6 +105,20 @@ def test_a_shared_ring_is_the_same_however_its_cells_are_numbered():
     assert open_chain.nets.hidden.layers[0].weight.shape == (8, 2 * FIELDS + 2)
 
 
+def test_a_shared_lattice_standardises_alike_cells_alike():
+    x = np.asarray(_states(400, 15))
+    E = LocalPotential(Lattice(CELLS, N, shared=True), width=8, data=x, key=jr.key(16))
+    M = LocalFriction(Lattice(CELLS, N, shared=True), width=8, scaling=SCALING, key=jr.key(17))
+    for f in range(FIELDS):
+        field = x[:, f * CELLS:(f + 1) * CELLS]  # field f of every cell
+        for stats in (E.shift, E.scale, M.scaling.shift, M.scaling.scale):
+            assert len(set(stats[f * CELLS:(f + 1) * CELLS])) == 1
+        np.testing.assert_allclose(E.shift[f * CELLS], field.mean(), rtol=1e-12)
+        np.testing.assert_allclose(E.scale[f * CELLS], field.std(), rtol=1e-12)
+    own = LocalFriction(Lattice(CELLS, N), width=8, scaling=SCALING, key=jr.key(17))
+    assert own.scaling == SCALING
+
+
 def test_no_nan_where_the_energy_gradient_vanishes():
     M = LocalFriction(Lattice(CELLS, N), width=8, scaling=SCALING, key=jr.key(6))
     x = _states(1, 7)[0]

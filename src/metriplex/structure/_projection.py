@@ -28,6 +28,12 @@ def default_eps(eps: float | None, dtype: DTypeLike) -> float:
     return float(jnp.finfo(dtype).eps) if eps is None else float(eps)
 
 
+def eps_squared(eps: float | None, dtype: DTypeLike) -> float:
+    r""":math:`\varepsilon^2` of the projectors (:func:`default_eps`), floored at the dtype's
+    smallest normal number so that it cannot underflow to zero."""
+    return max(default_eps(eps, dtype) ** 2, float(jnp.finfo(dtype).tiny))
+
+
 def check_eps(eps: float | None) -> None:
     if eps is not None and not (np.isfinite(eps) and eps > 0.0):
         raise MetriplexError(

@@ -20,7 +20,7 @@ from ._mlp import folded_network, network_spec, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
 from ._registry import network_kwargs, register
-from ._projection import AbstractProjected, check_eps, default_eps
+from ._projection import AbstractProjected, check_eps, eps_squared
 from .potential import FeatureMap
 from .scaling import Scaling, scaling_spec, standardise_state
 
@@ -234,7 +234,7 @@ class ExchangeFriction(AbstractFriction):
         d = (jnp.ones(self.n, x.dtype) if self.scaling is None
              else jnp.asarray(self.scaling.scale, x.dtype))
         h = d * grad_energy
-        e2 = max(default_eps(self.eps, x.dtype) ** 2, float(jnp.finfo(x.dtype).tiny))
+        e2 = eps_squared(self.eps, x.dtype)
         s = jnp.sum(h * h) + jnp.asarray(e2, x.dtype)
         Mt = (jnp.diag(W @ (h * h)) - W * jnp.outer(h, h)) / s
         f = 1.0 if self.scaling is None else self.scaling.factor

@@ -36,7 +36,7 @@ from .._types import Array, Float, Matrix, Scalar, State
 from ._abstract import AbstractFriction, AbstractPotential
 from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, data_statistics, lower_assembly, network_spec
 from ._mlp import standardise
-from ._projection import check_eps, default_eps
+from ._projection import check_eps, eps_squared
 from ._registry import network_kwargs, register
 from .confinement import Confinement
 from .scaling import Scaling, scaling_spec, standardise_state
@@ -81,6 +81,21 @@ class Lattice:
         """The one-hot ``(bonds, 2 fields, n)`` map from a state to its bonds' variables (first
         cell's fields, then the second's); rows of a missing cell are zero."""
         return _selection(self.cells, self.n, self.periodic)
+
+    def pool(self, shift: Sequence[float], scale: Sequence[float]
+             ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """For a ``shared`` lattice, per-variable statistics (mean and standard deviation)
+        replaced by those of each field over all cells, so that alike cells are standardised
+        alike; unchanged otherwise."""
+        if not self.shared:
+            return tuple(shift), tuple(scale)
+        m = np.asarray(shift, float).reshape(self.fields, self.cells)
+        sd = np.asarray(scale, float).reshape(self.fields, self.cells)
+        mean = m.mean(axis=1, keepdims=True)
+        pooled = np.sqrt(np.mean(sd**2 + (m - mean) ** 2, axis=1, keepdims=True))
+        ones = np.ones((1, self.cells))
+        return (tuple(float(v) for v in (mean * ones).ravel()),
+                tuple(float(v) for v in (pooled * ones).ravel()))
 
     def to_json(self) -> dict[str, Any]:
         """What a block's spec records of the lattice (``n`` is the model's)."""
@@ -172,7 +187,7 @@ class LocalPotential(AbstractPotential):
                 f"LocalPotential output_scale must be finite and > 0; got {output_scale}.")
         self.lattice = lattice
         if data is not None:
-            shift, scale = data_statistics(np.asarray(data))
+            shift, scale = lattice.pool(*data_statistics(np.asarray(data)))
         self.shift = None if shift is None else tuple(float(v) for v in shift)
         self.scale = None if scale is None else tuple(float(v) for v in scale)
         self.output_scale = float(output_scale)
@@ -232,6 +247,8 @@ class LocalFriction(AbstractFriction):
         check_eps(eps)
         self.lattice = lattice
         self.n = lattice.n
+        if scaling is not None and lattice.shared:  # alike cells standardised alike
+            scaling = Scaling(*lattice.pool(scaling.shift, scaling.scale), scaling.factor)
         self.scaling = scaling
         self.eps = None if eps is None else float(eps)
         w = 2 * lattice.fields
@@ -249,7 +266,7 @@ class LocalFriction(AbstractFriction):
         d = (jnp.ones(self.n, x.dtype) if self.scaling is None
              else jnp.asarray(self.scaling.scale, x.dtype))
         h = jnp.einsum("bwn,n->bw", S, d * grad_energy)
-        e2 = max(default_eps(self.eps, x.dtype) ** 2, float(jnp.finfo(x.dtype).tiny))
+        e2 = eps_squared(self.eps, x.dtype)
         h_hat = h * jax.lax.rsqrt(jnp.sum(h * h, axis=1, keepdims=True) + e2)
         F = B - h_hat[:, :, None] * jnp.einsum("bw,bwk->bk", h_hat, B)[:, None, :]
         G = jnp.einsum("bwn,bwk->bnk", S, F)  # S_b^T F_b, (bonds, n, w)
