@@ -166,6 +166,15 @@ def test_training_with_the_command_line_spelling(tmp_path):
     assert float(jnp.max(jnp.abs(jnp.einsum("bij,bj->bi", M, gE)))) < 1e-5 * scale
 
 
+def test_a_local_energy_takes_no_quadratic_term(tmp_path):
+    data = generate(get_system("thermoelastic-chain", particles=2), trajectories=3, steps=10,
+                    seed=0)
+    config = RunConfig(poisson="canonical:2", entropy="sum:4,5", energy="local:2",
+                       quadratic=True, steps=10)
+    with pytest.raises(mx.MetriplexError, match="--energy local .* no --quadratic"):
+        train_run(data, config, tmp_path / "run", progress=False)
+
+
 def test_the_command_line_spelling_is_checked_and_exact():
     cfg = RunConfig(poisson="canonical:3", entropy="sum:6,7,8", energy="local:3",
                     friction="local:3,periodic")

@@ -148,21 +148,25 @@ def lattice(argument: str, n: int, option: str) -> Lattice:
     return Lattice(count, n, periodic="periodic" in words, shared="shared" in words)
 
 
+def _lattice_check(option: str) -> Callable[[str, int], None]:
+    def check(argument: str, n: int) -> None:
+        lattice(argument, n, option)
+
+    return check
+
+
 def _local_energy(b: Learn) -> LocalPotential:
-    if b.features is not None or b.quadratic:
+    # (--features for a local block is refused with the other options, by validate.)
+    if b.quadratic:
         raise MetriplexError(
-            "--energy local reads each bond's own variables: it takes neither --features for "
-            "the energy nor --quadratic. Leave those out, or use --energy neural.")
+            "--energy local reads each bond's own variables: it takes no --quadratic. Leave "
+            "it out, or use --energy neural.")
     return LocalPotential(lattice(b.argument, b.n, "--energy"), data=b.x,
                           output_scale=b.output_scale, confinement=b.confinement, key=b.key,
                           **b.net)
 
 
 def _local_friction(b: Learn) -> LocalFriction:
-    if b.features is not None:
-        raise MetriplexError(
-            "--friction local reads each bond's own variables, not features: leave friction "
-            "out of --features-for, or use --friction neural.")
     return LocalFriction(lattice(b.argument, b.n, "--friction"), scaling=b.scaling, key=b.key,
                          **b.net)
 
@@ -178,7 +182,7 @@ LOCAL_HELP = ("local:CELLS[,periodic][,shared] (a sum of terms over neighbouring
 ENERGY = {
     "neural": Spelling("neural (default)", learned=_potential),
     "local": Spelling(LOCAL_HELP, learned=_local_energy,
-                      check=lambda a, n: lattice(a, n, "--energy") and None),
+                      check=_lattice_check("--energy")),
 }
 ENTROPY = {
     "neural": Spelling("neural (default)", learned=_potential),
@@ -205,7 +209,7 @@ FRICTION = {
                                                             key=b.key)),
     "local": Spelling(LOCAL_HELP.replace("a sum", "M grad E = 0 exactly; a sum"),
                       learned=_local_friction,
-                      check=lambda a, n: lattice(a, n, "--friction") and None),
+                      check=_lattice_check("--friction")),
     "zero": Spelling("zero", given=lambda a, n: ZeroFriction(n)),
     "file": Spelling("file:PATH (a constant M from .npy, .npz or .mat)",
                      given=lambda a, n: ConstantFriction(read_matrix(a, "M", n))),

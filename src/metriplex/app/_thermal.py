@@ -88,12 +88,11 @@ def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
     if config.degeneracy == "exact":
         return True, True
-    # exactly degenerate by construction, in any mode
-    exchange = option(config.friction).kind in EXACT_FRICTIONS
+    by_construction = option(config.friction).kind in EXACT_FRICTIONS  # in any mode
     if config.degeneracy == "soft":
-        return False, exchange
+        return False, by_construction
     return (config.poisson == "neural" and option(config.entropy).kind == "sum",
-            exchange or (config.friction == "neural" and reversible_first_on(config)))
+            by_construction or (config.friction == "neural" and reversible_first_on(config)))
 
 
 def confine_on(config: ThermalFields) -> bool:

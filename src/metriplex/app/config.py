@@ -302,18 +302,24 @@ def _feature_blocks(config: RunConfig) -> tuple[str, ...]:
         )
     if config.features == "none":
         return blocks
-    if "friction" in blocks and option(config.friction).kind == "exchange":
-        raise MetriplexError(
-            f"--friction exchange builds M from the energy's gradient by variable pairs, and its "
-            f"rates read the state, not features; got --features {config.features} "
-            f"--features-for {config.features_for}. Leave friction out of --features-for.")
-    for block, value in (("energy", config.energy), ("friction", config.friction)):
-        if block in blocks and option(value).kind == "local":
+    values = {"energy": config.energy, "entropy": config.entropy, "friction": config.friction}
+    for block in blocks:
+        kind = option(values[block]).kind
+        reads = STATE_READERS.get((block, kind))
+        if reads is not None:
             raise MetriplexError(
-                f"--{block} local reads each bond's own variables, not features; got --features "
-                f"{config.features} --features-for {config.features_for}. Leave {block} out "
-                "of --features-for.")
+                f"--{block} {kind} {reads}, not features; got --features {config.features} "
+                f"--features-for {config.features_for}. Leave {block} out of --features-for.")
     return blocks
+
+
+#: The learned blocks that read the state and cannot see ``--features``, and what they read.
+STATE_READERS = {
+    ("friction", "exchange"): "builds M from the energy's gradient by variable pairs, and its "
+                              "rates read the state",
+    ("energy", "local"): "reads each bond's own variables",
+    ("friction", "local"): "reads each bond's own variables",
+}
 
 
 def _spelling(value: str, flag: str) -> Spelling:

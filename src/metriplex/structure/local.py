@@ -259,17 +259,17 @@ class LocalFriction(AbstractFriction):
     uses_gradient: ClassVar[bool] = True
 
     def __call__(self, x: State, grad_energy: State) -> Matrix:
-        S = jnp.asarray(self.lattice.selection(), x.dtype)
+        S = self.lattice.selection()
         w = S.shape[1]
-        a = self.nets(_windows(self.lattice.selection(), standardise_state(x, self.scaling)))
+        a = self.nets(_windows(S, standardise_state(x, self.scaling)))
         B = (a @ jnp.asarray(lower_assembly(w).T, x.dtype)).reshape(-1, w, w)
         d = (jnp.ones(self.n, x.dtype) if self.scaling is None
              else jnp.asarray(self.scaling.scale, x.dtype))
-        h = jnp.einsum("bwn,n->bw", S, d * grad_energy)
+        h = _windows(S, d * grad_energy)
         e2 = eps_squared(self.eps, x.dtype)
         h_hat = h * jax.lax.rsqrt(jnp.sum(h * h, axis=1, keepdims=True) + e2)
         F = B - h_hat[:, :, None] * jnp.einsum("bw,bwk->bk", h_hat, B)[:, None, :]
-        G = jnp.einsum("bwn,bwk->bnk", S, F)  # S_b^T F_b, (bonds, n, w)
+        G = jnp.einsum("bwn,bwk->bnk", jnp.asarray(S, x.dtype), F)  # S_b^T F_b, (bonds, n, w)
         Mt = jnp.einsum("bnk,bmk->nm", G, G)
         f = 1.0 if self.scaling is None else self.scaling.factor
         return f * (d[:, None] * Mt * d[None, :])
