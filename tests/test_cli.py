@@ -66,7 +66,8 @@ def test_run_folder_contents(oscillator_run):
     # What the options left at their default decided, spelled out (the options read null).
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
     assert cfg["decided"] == {"confine": True, "reversible_first": True, "w_temperature": 1.0,
-                              "starts": 1, "exact_poisson_degeneracy": False,
+                              "starts": 1, "residual_metric": "correlated",
+                              "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
                               "patience": 20}
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).

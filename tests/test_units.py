@@ -56,7 +56,7 @@ def _fit(d, time_factor):
     units = units_for(CONFIG, d)
     model = build_model(CONFIG, d, key=jr.key(0), units=units)
     # lr 3e-3: at 1e-2 rounding differences (1e-16) grow to 1e-3 within 300 steps.
-    model, history = mx.fit(model, d, loss=build_loss(CONFIG, units), steps=300,
+    model, history = mx.fit(model, d, loss=build_loss(CONFIG, units, d), steps=300,
                             learning_rate=3e-3, eval_every=100, scale=units.rate, progress=False,
                             rollout_check=None, key=jr.key(1))
     # The vector field in the data's own units, mapped back to the first data's units.

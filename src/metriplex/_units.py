@@ -9,11 +9,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .data import Trajectories, time_scale
+from .data import Pairs, Trajectories, observed_rates, time_scale
 
 if TYPE_CHECKING:
     from .structure._abstract import AbstractFriction, AbstractPoisson, AbstractPotential
     from .structure.scaling import Scaling
+
+
+#: The most weight :meth:`Units.residual_metric` gives a combination of variables, relative to
+#: the plain residual's: rates kept correlated to 1 part in 1 000 are fitted as if they moved as
+#: much as their variables do, and data noise below that is not amplified further.
+METRIC_CAP = 1000.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,6 +90,48 @@ class Units:
     def rate(self) -> np.ndarray:
         r"""Per-variable rate scale :math:`d_i/\tau`: the unit of every residual."""
         return np.asarray(self.scale) / self.time
+
+    def residual_metric(self, data: "Trajectories | Pairs", *,
+                        cap: float = METRIC_CAP) -> np.ndarray:
+        r"""The metric :math:`W` ``(n, n)`` in which the pair residual is measured:
+        :math:`r^\top W r` for the residual :math:`r` in units of :attr:`rate`, instead of
+        :math:`|r|^2`.
+
+        It is the identity, plus weight on each combination of variables whose observed rates
+        the data keep correlated: a combination that moves far less than its variables do
+        (heat passed between two cells at nearly equal temperatures leaves the sum of their
+        entropies almost still; a conserved energy ties the rates of its variables). With
+        :math:`v = D^{-1}\dot x` the observed rates in standard deviations per unit of time,
+        :math:`R` their correlation matrix (second moments about zero, so a rate that is
+        never zero keeps its mean) and :math:`R = \sum_k \mu_k u_k u_k^\top`, each
+        combination :math:`u_k` whose share :math:`\mu_k` is below 1 gets the extra weight
+        :math:`1/(\mu_k + 1/\mathrm{cap}) - 1`, at most ``cap - 1``: in the residual it is
+        the direction :math:`a_k \propto \operatorname{diag}(\operatorname{rms} v)^{-1}u_k`.
+        Uncorrelated rates give the identity (the plain residual), and so does any variable
+        alone, however slowly it moves; variables that do not move are left out.
+
+        The metric depends on the data's rates only through their correlations, so it does
+        not change with the unit of time, the units or offsets of the variables.
+        """
+        n = len(self.scale)
+        squares, count = np.zeros((n, n)), 0
+        d = np.asarray(self.scale, np.float64)
+        for v in observed_rates(data):
+            v = v / d[None, :]
+            squares += v.T @ v
+            count += len(v)
+        second = squares / max(count, 1)
+        rms = np.sqrt(np.maximum(np.diag(second), 0.0))
+        live = np.flatnonzero(rms > 1e-12 * max(float(rms.max(initial=0.0)), 1e-300))
+        metric = np.eye(n)
+        if len(live) < 2 or not np.all(np.isfinite(second)):
+            return metric
+        share, combos = np.linalg.eigh(second[np.ix_(live, live)] / np.outer(rms[live], rms[live]))
+        extra = np.maximum(1.0 / (np.maximum(share, 0.0) + 1.0 / cap) - 1.0, 0.0)
+        directions = combos / rms[live][:, None]
+        directions /= np.linalg.norm(directions, axis=0)[None, :]
+        metric[np.ix_(live, live)] += (directions * extra) @ directions.T
+        return metric
 
     def poisson_scaling(self) -> Scaling:
         r"""The :class:`~metriplex.Scaling` of a learned :math:`L`:

@@ -69,32 +69,36 @@ def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -
     and networks measured in :math:`\tau` do not depend on either. Data that never move get
     :math:`\tau = 1`.
     """
-    squares, count = np.zeros(0), 0
-    rows = 1 << 16  # in blocks, so large data need no temporary copies of their size
-    if isinstance(pairs, Trajectories):  # the pairs of consecutive rows, never built whole
-        data = pairs
-        d = state_scale(data.x) if scale is None else np.asarray(scale, dtype=np.float64)
-        squares = np.zeros(data.n)
-        for s in range(0, len(data.t) - 1, rows):
-            e = min(s + rows, len(data.t) - 1)
-            same = data.trajectory[s + 1 : e + 1] == data.trajectory[s:e]
-            v = (data.x[s + 1 : e + 1] - data.x[s:e])[same] / np.diff(data.t[s : e + 1])[same, None]
-            squares += np.sum(v**2, axis=0)
-            count += int(same.sum())
+    if isinstance(pairs, Trajectories):
+        d = state_scale(pairs.x) if scale is None else np.asarray(scale, dtype=np.float64)
     else:
         d = state_scale(pairs.x0) if scale is None else np.asarray(scale, dtype=np.float64)
-        squares = np.zeros(np.shape(pairs.x0)[1])
-        for s in range(0, len(pairs.dt), rows):
-            v = (np.asarray(pairs.x1[s : s + rows], np.float64)
-                 - np.asarray(pairs.x0[s : s + rows], np.float64)) / np.asarray(
-                pairs.dt[s : s + rows], np.float64)[:, None]
-            squares += np.sum(v**2, axis=0)
-        count = len(pairs.dt)
+    squares, count = np.zeros(len(d)), 0
+    for v in observed_rates(pairs):
+        squares += np.sum(v**2, axis=0)
+        count += len(v)
     rate = np.sqrt(squares / max(count, 1)) / d
     moving = rate > 1e-12 * max(float(rate.max(initial=0.0)), 1e-300)
     if not np.any(moving) or not np.all(np.isfinite(rate)):
         return 1.0
     return float(np.exp(-np.mean(np.log(rate[moving]))))
+
+
+def observed_rates(pairs: "Pairs | Trajectories", rows: int = 1 << 16) -> Iterator[np.ndarray]:
+    r"""The observed rates :math:`(x_{n+1} - x_n)/\Delta t_n` of every pair, in float64 blocks of
+    at most ``rows`` pairs (so large data need no temporary copies of their size)."""
+    if isinstance(pairs, Trajectories):  # the pairs of consecutive rows, never built whole
+        data = pairs
+        for s in range(0, len(data.t) - 1, rows):
+            e = min(s + rows, len(data.t) - 1)
+            same = data.trajectory[s + 1 : e + 1] == data.trajectory[s:e]
+            x = np.asarray(data.x[s : e + 1], np.float64)
+            yield (x[1:] - x[:-1])[same] / np.diff(data.t[s : e + 1])[same, None]
+        return
+    for s in range(0, len(pairs.dt), rows):
+        yield (np.asarray(pairs.x1[s : s + rows], np.float64)
+               - np.asarray(pairs.x0[s : s + rows], np.float64)) / np.asarray(
+            pairs.dt[s : s + rows], np.float64)[:, None]
 
 
 def uniform_times(trajectory: ArrayLike, dt: float) -> np.ndarray:

@@ -29,11 +29,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.random as jr
+import numpy as np
 
 from ._errors import MetriplexError, count_of, expect_instance
 from ._loss_base import AbstractLossTerm, Batch, Context, Loss, Window
 from ._model import GenericModel, Terms
-from ._types import Scalar, State
+from ._types import Matrix, Scalar, State
 from .integrate import AbstractScheme, CrankNicolson, DiscreteGradient, ImplicitMidpoint
 
 # The terms, their sum and what a term of your own subclasses and receives (AbstractLossTerm,
@@ -45,12 +46,28 @@ __all__ = ["AbstractJacobiEstimator", "AbstractLossTerm", "Batch", "Context",
            "Window", "stochastic_jacobi"]
 
 
-def _sq(v, scale, weight=None):
-    per = jnp.sum((v / scale[None, :]) ** 2, axis=-1)
+def _sq(v, scale, weight=None, metric=None):
+    u = v / scale[None, :]
+    per = jnp.sum(u**2, axis=-1) if metric is None else jnp.sum(u * (u @ metric.astype(u.dtype)),
+                                                                axis=-1)
     if weight is None:
         return jnp.mean(per)
     # where, not a product: a weighed-out "pair" across trajectories may be anything
     return jnp.sum(jnp.where(weight > 0, weight * per, 0.0)) / jnp.maximum(jnp.sum(weight), 1)
+
+
+def _metric(w):
+    """A residual metric as a float array, checked: square, symmetric, positive definite."""
+    if w is None or isinstance(w, jax.core.Tracer):  # built under a transform: unchecked
+        return w
+    a = np.asarray(w, dtype=np.float64)
+    if a.ndim != 2 or a.shape[0] != a.shape[1] or not np.all(np.isfinite(a)) \
+            or not np.allclose(a, a.T, rtol=1e-10, atol=0.0) or np.linalg.eigvalsh(a).min() <= 0:
+        raise MetriplexError(
+            f"SchemeResidual's metric must be a finite, symmetric, positive definite (n, n) "
+            f"matrix; got shape {a.shape}. Use metriplex.Units.residual_metric(data), or leave "
+            f"it out for the plain residual.")
+    return jnp.asarray(a)
 
 
 class SchemeResidual(AbstractLossTerm):
@@ -58,10 +75,15 @@ class SchemeResidual(AbstractLossTerm):
 
     .. math:: r_n = \frac{x_{n+1}-x_n}{\Delta t_n} - \tfrac12\big(f(x_n) + f(x_{n+1})\big).
 
-    It needs no derivative of the data, only the pairs and their own ``dt``.
+    It needs no derivative of the data, only the pairs and their own ``dt``. Each residual
+    is measured in the data's rate units (``scale``) as :math:`|r|^2`, or as
+    :math:`r^\top W r` with a ``metric`` :math:`W` ``(n, n)``, symmetric positive definite
+    (:meth:`metriplex.Units.residual_metric`: weight on combinations of variables that the
+    data keep nearly still).
     """
 
     scheme: AbstractScheme
+    metric: Matrix | None = eqx.field(default=None, converter=_metric)
     name: ClassVar[str] = "residual"
 
     @property
@@ -81,7 +103,7 @@ class SchemeResidual(AbstractLossTerm):
             r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0, 0))(*args, ctx.mid)
         else:
             r = jax.vmap(self.scheme.residual, in_axes=(None, 0, 0, 0, 0, 0))(*args)
-        return _sq(r, batch.scale, batch.weight)
+        return _sq(r, batch.scale, batch.weight, self.metric)
 
 
 class _AbstractDegeneracy(AbstractLossTerm):

@@ -200,18 +200,23 @@ def fit_settings(config: RunConfig) -> dict[str, Any]:
     )
 
 
-def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
+def build_loss(config: RunConfig, units: Units | None = None,
+               data: Trajectories | None = None) -> Loss:
     r"""Scheme residual plus the penalties that the structure needs (none where exact).
 
     The trainer measures residuals in units of the data's rates (:attr:`Units.rate`). With
     ``units``, the penalties are measured in the same dimensionless units as the residual
     (:math:`L\nabla S` scaled by :math:`\sigma_E/\sigma_S`, :math:`M\nabla E` by
     :math:`\sigma_S/\sigma_E`, the Jacobi tensor by :math:`\sigma_E^2/\tau`), so a weight
-    means the same on any data.
+    means the same on any data. With ``units`` and the training ``data``, ``--residual-metric
+    correlated`` measures the residual in :meth:`~metriplex.Units.residual_metric`.
     """
     e, s, tau = (1.0, 1.0, 1.0) if units is None else (units.energy, units.entropy, units.time)
     scheme = scheme_from_name(config.scheme)
-    loss = config.w_traj * SchemeResidual(scheme)
+    metric = None
+    if residual_metric_of(config) == "correlated" and data is not None and units is not None:
+        metric = units.residual_metric(data)
+    loss = config.w_traj * SchemeResidual(scheme, metric=metric)
     if config.window_steps > 0:
         loss = loss + config.w_traj * RolloutWindow(scheme, steps=config.window_steps)
     exact_L, exact_M = exact_blocks(config)
@@ -233,6 +238,21 @@ def build_loss(config: RunConfig, units: Units | None = None) -> Loss:
             _jacobi_estimator(config), samples=config.jacobi_samples
         )
     return loss
+
+
+def residual_metric_of(config: RunConfig) -> str:
+    """``--residual-metric``; ``auto`` (the default) is ``correlated`` where the model has a
+    friction (M learned or given) and ``diagonal`` where M = 0.
+
+    Where heat passes between cells, or matter between species, the data keep combinations of
+    variables nearly still (a sum of entropies, a conserved energy or mass) that the plain
+    residual cannot see, and weighing them was measured to help: 2-15x on the four such
+    systems measured (docs/zoo.md, *The residual's metric*). Where M = 0 the nearly still
+    combinations measured were momenta that only an exactly symmetric learned E conserves,
+    and weighing them cost 1.7-5x on three vortices."""
+    if config.residual_metric != "auto":
+        return config.residual_metric
+    return "diagonal" if config.friction == "zero" else "correlated"
 
 
 def _at_midpoints(config: RunConfig) -> bool:

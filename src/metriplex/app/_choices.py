@@ -24,6 +24,11 @@ JACOBI_CHOICES = {
     "stochastic": "stochastic (random probes; see --jacobi-probes, --jacobi-samples)",
 }
 
+#: How the pair residual is measured (``--residual-metric``): ``correlated`` is
+#: :meth:`metriplex.Units.residual_metric` of the training data, ``diagonal`` the plain norm,
+#: ``auto`` the former where the model has a friction (see ``_build.residual_metric_of``).
+RESIDUAL_METRICS = ("auto", "correlated", "diagonal")
+
 #: Where soft degeneracy penalties are evaluated (``--degeneracy-at``): ``midpoints`` is the
 #: losses' ``at_midpoints=True``.
 DEGENERACY_POINTS = ("states", "midpoints")

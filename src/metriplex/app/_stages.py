@@ -122,7 +122,7 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                 confine=confine_on(config))
     init_key, key = jax.random.split(key)
     began = time.perf_counter()
-    loss = build_loss(first, units)
+    loss = build_loss(first, units, train)
     start = _best_initialisation(first, init_key, starts=starts_for(config),
                                  label="reversible first", train=train, valid=valid,
                                  units=units, constant=constant, dtype=dtype, loss=loss,
@@ -165,5 +165,5 @@ def before_main(model: GenericModel, config: RunConfig, train: Trajectories,
         return model
     return _best_initialisation(config, model_key, starts=starts, label="starts", train=train,
                                 valid=valid, units=units, constant=constant, dtype=dtype,
-                                loss=build_loss(config, units), given=given,
+                                loss=build_loss(config, units, train), given=given,
                                 max_seconds=max_seconds)

@@ -94,6 +94,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")
+    g.add_argument("--residual-metric", help="how the pair residual is measured: auto (default: "
+                   "correlated where M is not zero) | correlated (extra weight on combinations "
+                   "of variables that the data keep nearly still, such as the sum of entropies "
+                   "of cells that exchange heat) | diagonal (each variable in its own units)")
     g.add_argument("--jacobi", help="Jacobi-identity penalty: " + choices_help(JACOBI_CHOICES))
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "

@@ -26,6 +26,7 @@ from ._choices import (  # noqa: F401
     FRICTION_CHOICES,
     JACOBI_CHOICES,
     POISSON_CHOICES,
+    RESIDUAL_METRICS,
     SCHEDULES,
     choices_help,
 )
@@ -107,6 +108,7 @@ class RunConfig:
     input_noise: float = 0.0
     consecutive: int = 1
     window_steps: int = 0
+    residual_metric: str = "auto"
     average_steps: int = 500
     w_temperature: float | None = None
     reversible_first: bool | None = None
@@ -181,6 +183,7 @@ def validate(config: RunConfig, n: int) -> None:
         _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
     _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
+    _choice(config.residual_metric, RESIDUAL_METRICS, "--residual-metric")
     _choice(config.jacobi, tuple(JACOBI_CHOICES), "--jacobi")
     if config.features not in ("none", *FEATURES):
         raise MetriplexError(

@@ -26,7 +26,7 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
-                     fit_settings, stopping_for, units_for)
+                     fit_settings, residual_metric_of, stopping_for, units_for)
 from ._report import report_figures
 from ._stages import before_main, left_of, starts_for
 from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on, scheme_from_name,
@@ -76,7 +76,8 @@ RESUME_MAY_CHANGE = ("max_minutes",)
 #: run saved with the decision spelled out (or made before the option had a default of None)
 #: resumes with the option left out.
 _DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
-            "w_temperature": temperature_weight, "starts": starts_for}
+            "w_temperature": temperature_weight, "starts": starts_for,
+            "residual_metric": residual_metric_of}
 
 
 def _resume_differences(saved: RunConfig, given: RunConfig) -> str:
@@ -260,7 +261,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                             given=given, dtype=dtype, model_key=model_key,
                             key=jr.fold_in(fit_key, 1), progress=progress, max_seconds=budget)
     model = with_dtype(model, dtype)
-    loss = build_loss(config, units)
+    loss = build_loss(config, units, train)
     exact_L, exact_M = exact_blocks(config)
     stopping = stopping_for(config)
     header = {
