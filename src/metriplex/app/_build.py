@@ -246,7 +246,7 @@ def residual_metric_of(config: RunConfig) -> str:
 
     Where heat passes between cells, or matter between species, the data keep combinations of
     variables nearly still (a sum of entropies, a conserved energy or mass) that the plain
-    residual cannot see, and weighing them was measured to help: 2-15x on the four such
+    residual cannot see, and weighing them was measured to help: 1.6-15x on the four such
     systems measured (docs/zoo.md, *The residual's metric*). Where M = 0 the nearly still
     combinations measured were momenta that only an exactly symmetric learned E conserves,
     and weighing them cost 1.7-5x on three vortices."""
