@@ -69,10 +69,8 @@ def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -
     and networks measured in :math:`\tau` do not depend on either. Data that never move get
     :math:`\tau = 1`.
     """
-    if isinstance(pairs, Trajectories):
-        d = state_scale(pairs.x) if scale is None else np.asarray(scale, dtype=np.float64)
-    else:
-        d = state_scale(pairs.x0) if scale is None else np.asarray(scale, dtype=np.float64)
+    states = pairs.x if isinstance(pairs, Trajectories) else pairs.x0
+    d = state_scale(states) if scale is None else np.asarray(scale, dtype=np.float64)
     squares, count = np.zeros(len(d)), 0
     for v in observed_rates(pairs):
         squares += np.sum(v**2, axis=0)
