@@ -65,7 +65,8 @@ def test_run_folder_contents(oscillator_run):
     assert cfg["names"] == ["q", "p", "s"] and cfg["config"]["poisson"] == "canonical:1"
     # What the options left at their default decided, spelled out (the options read null).
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
-    assert cfg["decided"] == {"confine": True, "reversible_first": True, "w_temperature": 1.0,
+    assert cfg["decided"] == {"confine": True, "reversible_first": True, "hold_energy": False,
+                              "w_temperature": 1.0,
                               "starts": 1, "residual_metric": "correlated",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,

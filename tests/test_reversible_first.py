@@ -8,12 +8,14 @@ import jax.numpy as jnp
 import jax.random as jr
 import pytest
 
+import metriplex as mx
 from metriplex import MetriplexError
 from metriplex.app.config import (
     PRESETS,
     RunConfig,
     confine_on,
     exact_blocks,
+    hold_energy_on,
     preset,
     reversible_first_on,
     temperature_weight,
@@ -46,6 +48,7 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
      "--reversible-first .*--friction neural or exchange"),
     (dict(reversible_first=True, poisson="zero"), "got --friction neural --poisson zero"),
     (dict(w_temperature=-1.0, entropy="sum:2"), r"--w-temperature \(a loss weight\) must be >= 0"),
+    (dict(hold_energy=True, reversible_first=False), "--hold-energy .* needs that stage"),
 ])
 def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     with pytest.raises(MetriplexError, match=match):
@@ -127,28 +130,65 @@ def test_with_s_learned_reversible_first_adds_no_temperature_hinge():
     assert exact_blocks(config) == (False, True)
 
 
-@pytest.mark.parametrize("poisson", ["neural", "casimir3", "lie-poisson"])
-def test_every_learned_l_of_the_first_stage_is_carried_into_the_main_one(poisson, monkeypatch):
+def _stage_fits(monkeypatch):
+    """The models that the stages' ``fit`` calls return, in order."""
     import metriplex.app._stages as stages
 
-    data = generate("relaxing-rigid-body", trajectories=4, steps=20, seed=0)
-    config = RunConfig(poisson=poisson, steps=40, eval_every=20, average_steps=0,
-                       validation=0.0)
-    fitted = {}
-    real_fit = stages.fit
+    fits, real_fit = [], stages.fit
 
     def spy(*args, **kwargs):
         model, history = real_fit(*args, **kwargs)
-        fitted["model"] = model
+        fits.append(model)
         return model, history
 
     monkeypatch.setattr(stages, "fit", spy)
+    return fits
+
+
+def _reversible_first(config, data):
     units = units_for(config, data)
     start = build_model(config, data, key=jr.key(0), units=units)
-    model = stages.reversible_first(start, config, data, None, units=units, constant=(),
-                                    dtype=jnp.float64, key=jr.key(1))
-    assert bool(eqx.tree_equal(model.poisson, fitted["model"].poisson))
-    assert bool(eqx.tree_equal(model.energy, fitted["model"].energy))
+    return start, reversible_first(start, config, data, None, units=units, constant=(),
+                                   dtype=jnp.float64, key=jr.key(1))
+
+
+@pytest.mark.parametrize("poisson", ["neural", "casimir3", "lie-poisson"])
+def test_every_learned_l_of_the_first_stage_is_carried_into_the_main_one(poisson, monkeypatch):
+    data = generate("relaxing-rigid-body", trajectories=4, steps=20, seed=0)
+    config = RunConfig(poisson=poisson, steps=40, eval_every=20, average_steps=0,
+                       validation=0.0)
+    assert not hold_energy_on(config)  # off by default: the first stage is the last fit
+    fits = _stage_fits(monkeypatch)
+    start, model = _reversible_first(config, data)
+    assert bool(eqx.tree_equal(model.poisson, fits[-1].poisson))
+    assert bool(eqx.tree_equal(model.energy, fits[-1].energy))
     assert bool(eqx.tree_equal(model.friction, start.friction))
     # The first stage did train L: it is not the L the main model was built with.
     assert not bool(eqx.tree_equal(model.poisson, start.poisson))
+
+
+def test_hold_energy_trains_the_rest_to_the_first_stage_energy(monkeypatch):
+    data = generate("relaxing-rigid-body", trajectories=4, steps=20, seed=0)
+    config = RunConfig(steps=40, eval_every=20, average_steps=0, validation=0.0, starts=1,
+                       hold_energy=True)
+    fits = _stage_fits(monkeypatch)
+    start, model = _reversible_first(config, data)
+    # Two fits: L grad E alone, then the rest with E held.
+    assert len(fits) == 2
+    first, held = fits
+    assert isinstance(first.friction, mx.ZeroFriction) and isinstance(held.energy, mx.Known)
+    assert bool(eqx.tree_equal(model.energy, first.energy))
+    assert bool(eqx.tree_equal(model.poisson, held.poisson))
+    assert bool(eqx.tree_equal(model.friction, held.friction))
+    # The first stage trained L, the held one M: neither is what the model was built with.
+    assert not bool(eqx.tree_equal(model.poisson, start.poisson))
+    assert not bool(eqx.tree_equal(model.friction, start.friction))
+
+
+def test_the_command_line_spells_hold_energy():
+    from metriplex.app._commands import _config_from_args
+    from metriplex.app.cli import build_parser
+
+    for flag, value in (("--hold-energy", True), ("--no-hold-energy", False), (None, None)):
+        argv = ["train", "d.npz", "--out", "r"] + ([flag] if flag else [])
+        assert _config_from_args(build_parser().parse_args(argv)).hold_energy is value

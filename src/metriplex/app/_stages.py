@@ -1,6 +1,7 @@
 """Training stages before the main one: ``--starts`` tries several initialisations and trains
 the best from its start, and ``--reversible-first`` trains the reversible part alone, so that the
-friction joins an energy that already drives the motion."""
+friction joins an energy that already drives the motion (with ``--hold-energy``, the friction
+is first trained to that energy held)."""
 
 from __future__ import annotations
 
@@ -17,10 +18,11 @@ from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
 from .._units import Units
 from ..data import Trajectories
+from ..structure import Known
 from ..train import fit
 from ._build import Given, build_loss, build_model, fit_settings
-from .config import (LEARNED_POISSON, RunConfig, confine_on, reversible_first_on,
-                     temperature_weight)
+from .config import (LEARNED_POISSON, RunConfig, confine_on, hold_energy_on,
+                     reversible_first_on, temperature_weight)
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -105,7 +107,8 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                      dtype: DTypeLike, key: jax.Array, progress: bool = False,
                      max_seconds: float | None = None) -> GenericModel:
     r"""``model`` with its energy (and its learned L) taken from a first training of the same
-    configuration with no friction, :math:`\dot x = L\nabla E` alone.
+    configuration with no friction, :math:`\dot x = L\nabla E` alone (and, with
+    ``--hold-energy``, the rest then trained to that energy held: :func:`friction_to_energy`).
 
     With S given and entropy produced along the data, a pure-friction model (E = 0, M = f
     f^T/σ) fits as exactly as the true one (README, *Friction that carries the motion*), and
@@ -113,12 +116,12 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     motion, the friction is left with what the energy cannot explain. The first stage keeps
     the model of its best validation loss: its held-out rollouts cannot follow the entropies,
     so judging it by them would keep an almost untrained one. ``max_seconds`` caps this stage
-    (``--max-minutes``, which the main stage shares).
+    and the held one together (``--max-minutes``, which the main stage shares).
     """
     # The first stage keeps the hinge on negative temperatures and the wall that the main one
     # has (decided for the main stage's structure, since its energy is carried over).
     first = dataclasses.replace(config, friction="zero", reversible_first=False,
-                                w_temperature=temperature_weight(config),
+                                hold_energy=False, w_temperature=temperature_weight(config),
                                 confine=confine_on(config))
     init_key, key = jax.random.split(key)
     began = time.perf_counter()
@@ -146,7 +149,48 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
     if config.poisson in LEARNED_POISSON:
         model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)
-    return model
+    if not hold_energy_on(config):
+        return model
+    return friction_to_energy(model, config, train, valid, units=units, dtype=dtype,
+                              key=jax.random.fold_in(key, 1), progress=progress,
+                              max_seconds=left_of(max_seconds, began))
+
+
+def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectories,
+                       valid: Trajectories | None, *, units: Units, dtype: DTypeLike,
+                       key: jax.Array, progress: bool = False,
+                       max_seconds: float | None = None) -> GenericModel:
+    r"""``model`` with the rest of it (friction, and L or S where learned) trained to the
+    energy of the first stage, which it holds: ``--hold-energy``, between the first stage of
+    ``--reversible-first`` and the main one.
+
+    The main stage starts with a friction that explains nothing yet, so the entropies' rates
+    are its largest residual, and at the full learning rate their gradients reach the energy
+    (through the temperatures and the exact degeneracy) and undo the fit of the forces that the
+    first stage made (the energetic pendulum, full size: a mean square residual of the
+    momenta of 0.04 of their rates' scale after the first stage, 0.2 after the main one).
+    Held, the energy gives the friction time to fit; the main stage then trains everything from
+    there. Like the first stage it keeps the model of its best validation loss and stops on its
+    plateau, within ``config.steps``. The energy is held as a :class:`~metriplex.Known`
+    function of the state, so the optimiser never sees its parameters.
+    """
+    energy = model.energy
+    held = eqx.tree_at(lambda m: m.energy, model, Known(lambda x: energy(x)))
+    began = time.perf_counter()
+    try:
+        fitted, history = fit(
+            held, train, loss=build_loss(config, units, train), validation=valid,
+            max_seconds=max_seconds, scale=units.rate, dtype=dtype, progress=progress,
+            rollout_check=None, key=key, **fit_settings(config),
+        )
+        stopped = history.stopped
+    except TrainingDiverged as e:
+        fitted, stopped = (held if e.model is None else e.model), str(e)
+    if stopped.startswith("interrupted"):
+        raise KeyboardInterrupt
+    print(f"friction to the energy held: {stopped} ({time.perf_counter() - began:.0f} s)",
+          file=sys.stderr)
+    return eqx.tree_at(lambda m: m.energy, fitted, energy)
 
 
 def before_main(model: GenericModel, config: RunConfig, train: Trajectories,

@@ -102,10 +102,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--jacobi-probes", type=int, help=f"probes per sample (default {d.jacobi_probes})")
     g.add_argument("--jacobi-samples", type=int, help="pairs of each batch that the Jacobi penalty "
                    "is evaluated on (default: all; fewer is cheaper, still unbiased)")
-    g.add_argument("--quadratic", action="store_true", default=None,
-                   help="add a learned quadratic form to the learned E and S networks (a "
-                   "second-order Taylor term that extrapolates the forces linearly; off by "
-                   "default)")
+    g.add_argument("--quadratic", action="store_true", default=None, help="add a learned "
+                   "quadratic form to the learned E and S networks (a second-order Taylor term "
+                   "that extrapolates the forces linearly; off by default)")
     g.add_argument("--features", help=" | ".join(("none", *FEATURES))
                    + " (invariant features of the state; default none)")
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
@@ -126,6 +125,9 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help="first train L grad E alone (no friction), then add the learned "
                    "friction, so that friction does not carry the motion (see the README; "
                    "default: on when M is learned and neither L nor S is zero)")
+    w.add_argument("--hold-energy", action=argparse.BooleanOptionalAction, default=None,
+                   help="after the first stage, train the friction to its energy held, then "
+                   "everything: needs --reversible-first (off by default; see the README)")
     w.add_argument("--starts", type=int, metavar="K", help="try K initialisations for "
                    f"{START_STEPS} steps each (at most a tenth of --steps), then train the one of "
                    "lowest validation loss from its start (in the first stage where there is "
@@ -142,8 +144,7 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    help=f"hidden-layer activation of every learned network, all smooth as the "
                    f"gradients of E and S need (default {d.activation})")
     w.add_argument("--lr", type=float, help=f"peak learning rate (default {d.lr})")
-    w.add_argument("--weight-decay", type=float,
-                   help=f"AdamW weight decay (default {d.weight_decay})")
+    w.add_argument("--weight-decay", type=float, help=f"AdamW weight decay (default {d.weight_decay})")
     w.add_argument("--steps", type=int, help=f"the most optimiser steps of each training stage "
                    f"(default {d.steps}); training usually stops earlier, when the held-out "
                    "rollouts stop improving")

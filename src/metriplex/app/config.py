@@ -40,6 +40,7 @@ from ._thermal import (  # noqa: F401 (re-exported)
     DEGENERACY_MODES,
     check_thermal_options,
     confine_on,
+    hold_energy_on,
     exact_blocks,
     entropy_variables,
     reversible_first_on,
@@ -112,6 +113,7 @@ class RunConfig:
     average_steps: int = 500
     w_temperature: float | None = None
     reversible_first: bool | None = None
+    hold_energy: bool | None = None
     starts: int | None = None
     confine: bool | None = None
     constant: str = "auto"

@@ -29,8 +29,8 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
                      fit_settings, residual_metric_of, stopping_for, units_for)
 from ._report import report_figures
 from ._stages import before_main, left_of, starts_for
-from .config import (RunConfig, confine_on, exact_blocks, reversible_first_on, scheme_from_name,
-                     temperature_weight, validate)
+from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
+                     scheme_from_name, temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -76,8 +76,8 @@ RESUME_MAY_CHANGE = ("max_minutes",)
 #: run saved with the decision spelled out (or made before the option had a default of None)
 #: resumes with the option left out.
 _DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
-            "w_temperature": temperature_weight, "starts": starts_for,
-            "residual_metric": residual_metric_of}
+            "hold_energy": hold_energy_on, "w_temperature": temperature_weight,
+            "starts": starts_for, "residual_metric": residual_metric_of}
 
 
 def _resume_differences(saved: RunConfig, given: RunConfig) -> str:
