@@ -102,6 +102,26 @@ def _best_initialisation(config: RunConfig, key: jax.Array, *, starts: int, labe
                       max_seconds=max_seconds))
 
 
+def _stage(start: GenericModel, config: RunConfig, train: Trajectories,
+           valid: Trajectories | None, *, loss: Any, units: Units, dtype: DTypeLike,
+           key: jax.Array, progress: bool, max_seconds: float | None) -> tuple[GenericModel, str]:
+    """A stage before the main one, trained from ``start`` with ``config``'s settings and kept
+    by its validation loss, not by held-out rollouts: ``(model, how it stopped)``."""
+    try:
+        fitted, history = fit(start, train, loss=loss, validation=valid, max_seconds=max_seconds,
+                              scale=units.rate, dtype=dtype, progress=progress,
+                              rollout_check=None, key=key, **fit_settings(config))
+        stopped = history.stopped
+    except TrainingDiverged as e:
+        # The main training starts from the best model before the divergence (or the untrained
+        # one) and meets the same settings: it keeps and saves its own best model.
+        fitted, stopped = (start if e.model is None else e.model), str(e)
+    if stopped.startswith("interrupted"):
+        # Nothing of these stages is checkpointed: stop the whole training, as Ctrl-C asks.
+        raise KeyboardInterrupt
+    return fitted, stopped
+
+
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
                      valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
                      dtype: DTypeLike, key: jax.Array, progress: bool = False,
@@ -130,21 +150,9 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                  label="reversible first", train=train, valid=valid,
                                  units=units, constant=constant, dtype=dtype, loss=loss,
                                  max_seconds=max_seconds)
-    try:
-        fitted, history = fit(
-            start, train, loss=loss, validation=valid,
-            max_seconds=left_of(max_seconds, began), scale=units.rate, dtype=dtype,
-            progress=progress,
-            rollout_check=None, key=key, **fit_settings(first),
-        )
-        stopped = history.stopped
-    except TrainingDiverged as e:
-        # The main training starts from the best energy before the divergence (or the untrained
-        # one) and meets the same settings: it keeps and saves its own best model.
-        fitted, stopped = (start if e.model is None else e.model), str(e)
-    if stopped.startswith("interrupted"):
-        # Nothing of this stage is checkpointed: stop the whole training, as Ctrl-C asks.
-        raise KeyboardInterrupt
+    fitted, stopped = _stage(start, first, train, valid, loss=loss, units=units, dtype=dtype,
+                             key=key, progress=progress,
+                             max_seconds=left_of(max_seconds, began))
     print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
     if config.poisson in LEARNED_POISSON:
@@ -177,17 +185,9 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
     energy = model.energy
     held = eqx.tree_at(lambda m: m.energy, model, Known(lambda x: energy(x)))
     began = time.perf_counter()
-    try:
-        fitted, history = fit(
-            held, train, loss=build_loss(config, units, train), validation=valid,
-            max_seconds=max_seconds, scale=units.rate, dtype=dtype, progress=progress,
-            rollout_check=None, key=key, **fit_settings(config),
-        )
-        stopped = history.stopped
-    except TrainingDiverged as e:
-        fitted, stopped = (held if e.model is None else e.model), str(e)
-    if stopped.startswith("interrupted"):
-        raise KeyboardInterrupt
+    fitted, stopped = _stage(held, config, train, valid, loss=build_loss(config, units, train),
+                             units=units, dtype=dtype, key=key, progress=progress,
+                             max_seconds=max_seconds)
     print(f"friction to the energy held: {stopped} ({time.perf_counter() - began:.0f} s)",
           file=sys.stderr)
     return eqx.tree_at(lambda m: m.energy, fitted, energy)
