@@ -97,7 +97,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     interrupted, else ``None``."""
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
-    from .config import reversible_first_on, validate
+    from .config import hold_energy_on, reversible_first_on, validate
     from ..io import read
     from .runs import RunData, check_run_folder, evaluate_run, train_parts, write_json
 
@@ -139,7 +139,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
-                        first_stage=reversible_first_on(config) and not args.resume))
+                        first_stage=reversible_first_on(config) and not args.resume,
+                        held_stage=hold_energy_on(config)))
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):

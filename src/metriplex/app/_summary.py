@@ -14,10 +14,11 @@ if TYPE_CHECKING:
 
 
 def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
-                  first_stage: bool = False) -> str:
+                  first_stage: bool = False, held_stage: bool = False) -> str:
     """train's final line: how training ended, and how the held-out rollouts went.
-    ``first_stage``: a first stage ran before the main one (``--reversible-first``); its steps
-    are on the line it printed, and ``seconds`` counts both."""
+    ``first_stage``: a first stage ran before the main one (``--reversible-first``; with
+    ``held_stage``, ``--hold-energy``'s too); their steps are on the lines they printed, and
+    ``seconds`` counts all."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
@@ -51,7 +52,9 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
-    steps = (f"{last} steps after the first stage's (L grad E alone, above), both in"
+    steps = (f"{last} steps after the first stage's (L grad E alone) and the held one's "
+             "(the friction to that energy; above), all in" if first_stage and held_stage else
+             f"{last} steps after the first stage's (L grad E alone, above), both in"
              if first_stage else f"{last} steps in")
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
