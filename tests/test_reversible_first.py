@@ -21,7 +21,7 @@ from metriplex.app.config import (
     temperature_weight,
     validate,
 )
-from metriplex.app._build import build_model, units_for
+from metriplex.app._build import build_loss, build_model, units_for
 from metriplex.app._stages import reversible_first
 from metriplex.app.runs import train_run
 from metriplex.systems import generate
@@ -106,7 +106,8 @@ def test_the_first_stage_trains_the_energy_with_the_wall_the_main_model_has():
     start = build_model(config, data, key=jr.key(0), units=units)
     assert start.energy.confinement is not None
     model = reversible_first(start, config, data, None, units=units, constant=(),
-                             dtype=jnp.float64, key=jr.key(1))
+                             dtype=jnp.float64, key=jr.key(1),
+                             main_loss=build_loss(config, units, data))
     assert model.energy.confinement == start.energy.confinement
 
 
@@ -149,7 +150,8 @@ def _reversible_first(config, data):
     units = units_for(config, data)
     start = build_model(config, data, key=jr.key(0), units=units)
     return start, reversible_first(start, config, data, None, units=units, constant=(),
-                                   dtype=jnp.float64, key=jr.key(1))
+                                   dtype=jnp.float64, key=jr.key(1),
+                                   main_loss=build_loss(config, units, data))
 
 
 @pytest.mark.parametrize("poisson", ["neural", "casimir3", "lie-poisson"])

@@ -18,6 +18,7 @@ from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
 from .._units import Units
 from ..data import Trajectories
+from ..losses import Loss
 from ..structure import Known
 from ..train import fit
 from ._build import Given, build_loss, build_model, fit_settings
@@ -124,8 +125,8 @@ def _stage(start: GenericModel, config: RunConfig, train: Trajectories,
 
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
                      valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
-                     dtype: DTypeLike, key: jax.Array, progress: bool = False,
-                     max_seconds: float | None = None) -> GenericModel:
+                     dtype: DTypeLike, key: jax.Array, main_loss: Loss,
+                     progress: bool = False, max_seconds: float | None = None) -> GenericModel:
     r"""``model`` with its energy (and its learned L) taken from a first training of the same
     configuration with no friction, :math:`\dot x = L\nabla E` alone (and, with
     ``--hold-energy``, the rest then trained to that energy held: :func:`friction_to_energy`).
@@ -135,8 +136,10 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     training from scratch tends to end there. Started from an energy that already drives the
     motion, the friction is left with what the energy cannot explain. The first stage keeps
     the model of its best validation loss: its held-out rollouts cannot follow the entropies,
-    so judging it by them would keep an almost untrained one. ``max_seconds`` caps this stage
-    and the held one together (``--max-minutes``, which the main stage shares).
+    so judging it by them would keep an almost untrained one. ``main_loss`` is the main
+    stage's (``build_loss(config, units, train)``), which the held stage trains with.
+    ``max_seconds`` caps this stage and the held one together (``--max-minutes``, which the
+    main stage shares).
     """
     # The first stage keeps the hinge on negative temperatures and the wall that the main one
     # has (decided for the main stage's structure, since its energy is carried over).
@@ -159,14 +162,14 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
         model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)
     if not hold_energy_on(config):
         return model
-    return friction_to_energy(model, config, train, valid, units=units, dtype=dtype,
-                              key=jax.random.fold_in(key, 1), progress=progress,
+    return friction_to_energy(model, config, train, valid, loss=main_loss, units=units,
+                              dtype=dtype, key=jax.random.fold_in(key, 1), progress=progress,
                               max_seconds=left_of(max_seconds, began))
 
 
 def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectories,
-                       valid: Trajectories | None, *, units: Units, dtype: DTypeLike,
-                       key: jax.Array, progress: bool = False,
+                       valid: Trajectories | None, *, loss: Loss, units: Units,
+                       dtype: DTypeLike, key: jax.Array, progress: bool = False,
                        max_seconds: float | None = None) -> GenericModel:
     r"""``model`` with the rest of it (friction, and L or S where learned) trained to the
     energy of the first stage, which it holds: ``--hold-energy``, between the first stage of
@@ -178,16 +181,17 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
     first stage made (the energetic pendulum, full size: a mean square residual of the
     momenta of 0.04 of their rates' scale after the first stage, 0.2 after the main one).
     Held, the energy gives the friction time to fit; the main stage then trains everything from
-    there. Like the first stage it keeps the model of its best validation loss and stops on its
-    plateau, within ``config.steps``. The energy is held as a :class:`~metriplex.Known`
-    function of the state, so the optimiser never sees its parameters.
+    there, with the same ``loss``. Like the first stage it keeps the model of its best
+    validation loss and stops on its plateau, within ``config.steps``. The energy is held as a
+    :class:`~metriplex.Known` function of the state, so the optimiser never sees its parameters.
     """
     energy = model.energy
+    # A closure, not the module itself: Known's function is static (hashed), and a module
+    # holds arrays.
     held = eqx.tree_at(lambda m: m.energy, model, Known(lambda x: energy(x)))
     began = time.perf_counter()
-    fitted, stopped = _stage(held, config, train, valid, loss=build_loss(config, units, train),
-                             units=units, dtype=dtype, key=key, progress=progress,
-                             max_seconds=max_seconds)
+    fitted, stopped = _stage(held, config, train, valid, loss=loss, units=units, dtype=dtype,
+                             key=key, progress=progress, max_seconds=max_seconds)
     print(f"friction to the energy held: {stopped} ({time.perf_counter() - began:.0f} s)",
           file=sys.stderr)
     return eqx.tree_at(lambda m: m.energy, fitted, energy)
@@ -196,18 +200,19 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
 def before_main(model: GenericModel, config: RunConfig, train: Trajectories,
                 valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
                 given: Given, dtype: DTypeLike, model_key: jax.Array, key: jax.Array,
-                progress: bool = False, max_seconds: float | None = None) -> GenericModel:
+                loss: Loss, progress: bool = False,
+                max_seconds: float | None = None) -> GenericModel:
     """The model the main stage starts from: ``model`` (built from ``model_key``) after the
     first stage where ``--reversible-first`` is on (which tries ``--starts`` initialisations
-    itself), else the best of ``--starts`` initialisations of the whole model."""
+    itself), else the best of ``--starts`` initialisations of the whole model, each tried
+    with the main stage's ``loss``."""
     if reversible_first_on(config):
         return reversible_first(model, config, train, valid, units=units, constant=constant,
-                                dtype=dtype, key=key, progress=progress,
+                                dtype=dtype, key=key, main_loss=loss, progress=progress,
                                 max_seconds=max_seconds)
     starts = starts_for(config)
     if starts <= 1:
         return model
     return _best_initialisation(config, model_key, starts=starts, label="starts", train=train,
                                 valid=valid, units=units, constant=constant, dtype=dtype,
-                                loss=build_loss(config, units, train), given=given,
-                                max_seconds=max_seconds)
+                                loss=loss, given=given, max_seconds=max_seconds)

@@ -256,12 +256,12 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
+    loss = build_loss(config, units, train)
     if not resume:  # the first stage or the best of --starts initialisations
         model = before_main(model, config, train, valid, units=units, constant=constant,
-                            given=given, dtype=dtype, model_key=model_key,
+                            given=given, dtype=dtype, model_key=model_key, loss=loss,
                             key=jr.fold_in(fit_key, 1), progress=progress, max_seconds=budget)
     model = with_dtype(model, dtype)
-    loss = build_loss(config, units, train)
     exact_L, exact_M = exact_blocks(config)
     stopping = stopping_for(config)
     header = {
