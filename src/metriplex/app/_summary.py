@@ -52,10 +52,12 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
-    steps = (f"{last} steps after the first stage's (L grad E alone) and the held one's "
-             "(the friction to that energy; above), all in" if first_stage and held_stage else
-             f"{last} steps after the first stage's (L grad E alone, above), both in"
-             if first_stage else f"{last} steps in")
+    steps = f"{last} steps in"
+    if first_stage and held_stage:
+        steps = (f"{last} steps after the first stage's (L grad E alone) and the held one's "
+                 "(the friction to that energy; above), all in")
+    elif first_stage:
+        steps = f"{last} steps after the first stage's (L grad E alone, above), both in"
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 

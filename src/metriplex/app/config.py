@@ -40,9 +40,9 @@ from ._thermal import (  # noqa: F401 (re-exported)
     DEGENERACY_MODES,
     check_thermal_options,
     confine_on,
-    hold_energy_on,
-    exact_blocks,
     entropy_variables,
+    exact_blocks,
+    hold_energy_on,
     reversible_first_on,
     temperature_weight,
 )
