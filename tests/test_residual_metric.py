@@ -54,7 +54,7 @@ def test_a_variable_alone_keeps_weight_one_however_slowly_it_moves_and_a_still_o
     slow = 1e-4 * np.cumsum(rng.normal(size=60))  # moves, slowly, on its own
     still = np.full(60, 7.0)
     w = _metric(_trajectories(np.stack([fast, slow, still], axis=1)))
-    assert np.diag(w) == pytest.approx([w[0, 0], w[1, 1], 1.0])
+    assert 1.0 <= w[1, 1] < 1.5  # the slow variable: neither dropped nor weighed up
     assert w[2, 2] == 1.0 and not np.any(w[2, :2]) and not np.any(w[:2, 2])
     # The two moving variables are independent draws: weights near 1, no large one.
     assert np.linalg.eigvalsh(w).max() < 1.5
