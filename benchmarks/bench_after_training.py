@@ -25,7 +25,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from metriplex.app import _stages, cli, runs
+from metriplex.app import _repeats, _stages, cli
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="training step cap (default: metriplex train's default)")
     args = p.parse_args(argv)
     marks: dict[str, float] = {}
-    fit = runs.fit
+    fit = _repeats.fit
 
     def timed_fit(*a, **kw):
         # Training is every fit of the run (the starts' trials, the first stage, the main
@@ -58,11 +58,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.steps is not None:
             train += ["--steps", str(args.steps)]
         load = os.getloadavg()[0]
-        runs.fit = _stages.fit = timed_fit
+        _repeats.fit = _stages.fit = timed_fit
         try:
             code = cli.main(train)
         finally:
-            runs.fit = _stages.fit = fit
+            _repeats.fit = _stages.fit = fit
         end = time.perf_counter()
     if "fit_end" not in marks:
         print(f"metriplex train stopped before training (exit {code}); nothing to time.")

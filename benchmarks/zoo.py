@@ -161,6 +161,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
     out = workdir / case.name
     model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
                                               progress=False)
+    header = json.loads((out / "config.json").read_text())
     scheme = scheme_from_name(config.scheme)
     rollout = rollout_data(model, test, scheme=scheme)
     report = evaluate(model, test, scheme=scheme, rollout=rollout)
@@ -194,6 +195,10 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "generalisation_gap": history.generalisation_gap(),
         "stopped": history.stopped,
         "converged": history.converged,
+        # The held-out rollout score of the kept model (its validation trajectories, in units
+        # of each variable's spread), and every training's where --repeats trained again.
+        "held_out_score": history.best_rollout,
+        **{k: header.get(k) for k in ("trainings", "kept_training")},
         "data_seconds": gen_seconds,
         "overrides": overrides,
         "black_box": black_box(train, test, config) if with_black_box else None,
@@ -217,6 +222,15 @@ def _share(row: dict) -> str:
     return f"{f(learned)} ({f(true)})"
 
 
+def _trainings(row: dict) -> str:
+    """How many trainings ran (``--repeats``) and which was kept, with the held-out score of
+    each: "1 (0.012)" for one training."""
+    runs = row.get("trainings") or [{"score": row.get("held_out_score")}]
+    kept = row.get("kept_training", 0) if len(runs) > 1 else 0
+    scores = ", ".join("-" if o.get("score") is None else f"{o['score']:.2g}" for o in runs)
+    return f"{len(runs)} ({scores})" + (f", kept {kept + 1}" if len(runs) > 1 else "")
+
+
 def _fmt(v: float) -> str:
     return "inf" if not np.isfinite(v) else f"{v:.2e}"
 
@@ -232,10 +246,10 @@ def _black_box(row: dict) -> str:
 def print_table(rows: list[dict], file=sys.stdout) -> None:
     boxed = any(r.get("black_box") is not None for r in rows)
     head = ("| system | n | flags given | rel. L2 | standardised | failed | CN truth | "
-            "L∇E share (true) | steps | kept | train s | bar |"
+            "L∇E share (true) | steps | kept | trainings | train s | bar |"
             + (" black box, standardised |" if boxed else ""))
     print(head, file=file)
-    print("|" + "---|" * (12 + boxed), file=file)
+    print("|" + "---|" * (13 + boxed), file=file)
     for r in rows:
         met = r["failed"] == 0 and max(r["rel_l2"], r["rel_l2_standardised"]) <= BAR
         name = r["system"] + (" (held out)" if r["held_out"] else "")
@@ -243,7 +257,7 @@ def print_table(rows: list[dict], file=sys.stdout) -> None:
             f"| {name} | {r['n']} | `{r['flags']}` | {_fmt(r['rel_l2'])} | "
             f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/{r['test_trajectories']} | "
             f"{_fmt(r['ground_truth_cn_rel_l2'])} | {_share(r)} | {r['steps']} | {_kept(r)} | "
-            f"{r['train_seconds']:.0f} | "
+            f"{_trainings(r)} | {r['train_seconds']:.0f} | "
             f"{'met' if met else 'NOT met'} |{_black_box(r)}",
             file=file, flush=True,
         )

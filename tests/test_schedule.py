@@ -43,7 +43,8 @@ def test_plateau_stops_on_its_own(tmp_path):
     # improve, long before its 3 000-step budget.
     budget = 3000
     config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=budget,
-                       eval_every=50, patience=1, lr_cuts=0, schedule="plateau", float64=True)
+                       eval_every=50, patience=1, lr_cuts=0, schedule="plateau", float64=True,
+                       repeats=1)  # one training: its schedule is the subject
     _, history, *_ = train_run(data, config, tmp_path / "plateau", progress=False)
     assert history.step[-1] < budget and history.converged
     assert history.learning_rate[0] > 0 and jnp.isfinite(history.train["total"][-1])
@@ -64,7 +65,8 @@ def test_the_default_optimiser_state_lets_the_plateau_cut_the_rate():
 def test_plateau_cuts_the_rate_before_it_stops(tmp_path):
     data = make_data(damped_oscillator(), oscillator_x0(6), 0.1, 20, names=("q", "p", "s"))
     config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=3000,
-                       eval_every=50, patience=1, lr_cuts=2, schedule="plateau", float64=True)
+                       eval_every=50, patience=1, lr_cuts=2, schedule="plateau", float64=True,
+                       repeats=1)  # one training: its schedule is the subject
     _, history, *_ = train_run(data, config, tmp_path / "plateau", progress=False)
     assert history.converged and "after 2 learning-rate cuts" in history.stopped
     rates = sorted(set(history.learning_rate), reverse=True)

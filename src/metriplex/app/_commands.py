@@ -97,9 +97,11 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     interrupted, else ``None``."""
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
+    from ._repeats import trainings_note
     from .config import hold_energy_on, reversible_first_on, validate
     from ..io import read
-    from .runs import RunData, check_run_folder, evaluate_run, train_parts, write_json
+    from .runs import (RunData, check_run_folder, evaluate_run, run_config, train_parts,
+                       write_json)
 
     out = Path(args.out)
     check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
@@ -140,7 +142,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,
-                        held_stage=hold_energy_on(config)))
+                        held_stage=hold_energy_on(config),
+                        trainings=trainings_note(run_config(out))))
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):

@@ -12,10 +12,10 @@ from typing import Any
 
 #: Every preset was tuned and measured (docs/experiments.md) before the parameter average, the
 #: reversible-first stage with its temperature hinge, the wall around the data (where S is
-#: given) and the best of several starts (where L is learned) became defaults, so it keeps
-#: what it was tuned with.
+#: given), the best of several starts (where L is learned) and the repeated trainings became
+#: defaults, so it keeps what it was tuned with.
 _TUNED_WITHOUT_AVERAGE = dict(average_steps=0, reversible_first=False, w_temperature=0.0,
-                              confine=False, starts=1)
+                              confine=False, starts=1, repeats=1)
 
 _RIGID_BODY = dict(
     energy="neural", entropy="zero", poisson="neural", friction="zero", jacobi="exact",

@@ -14,11 +14,13 @@ if TYPE_CHECKING:
 
 
 def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
-                  first_stage: bool = False, held_stage: bool = False) -> str:
+                  first_stage: bool = False, held_stage: bool = False,
+                  trainings: str = "") -> str:
     """train's final line: how training ended, and how the held-out rollouts went.
     ``first_stage``: a first stage ran before the main one (``--reversible-first``; with
     ``held_stage``, ``--hold-energy``'s too); their steps are on the lines they printed, and
-    ``seconds`` counts all."""
+    ``seconds`` counts all. ``trainings``: what ``--repeats`` did, where it trained more than
+    once (:func:`~metriplex.app._repeats.trainings_note`)."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
@@ -35,6 +37,8 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
                       "dynamics away from the training trajectories (give more trajectories or "
                       "more of the structure), or training ended in a poor fit (try another "
                       "--seed)")
+    if trainings:
+        ended += f"; {trainings}"
     early = kept_early(history, first_stage)
     if early:
         ended += early

@@ -21,7 +21,9 @@ from ..integrate import ROOT_FINDERS, SCHEMES
 from ..structure import ACTIVATIONS
 from ..io._registry import layouts_text, suffixes_text
 from ._presets import EXPERIMENTS, PRESETS
+from ._repeats import GOOD_SCORE, REPEATS
 from ._stages import START_STEPS, STARTS
+from ._allocator import return_large_blocks
 from .config import FEATURES
 
 __all__ = ["DATA_FORMAT", "EXIT_BAD_INPUT", "EXIT_FAILED", "build_parser", "cmd_evaluate",
@@ -133,6 +135,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "lowest validation loss from its start (in the first stage where there is "
                    "one): a learned L and E can start into a poor minimum (default: "
                    f"{STARTS} where L is learned, else 1)")
+    w.add_argument("--repeats", type=int, metavar="K", help="train again from another "
+                   "initialisation while the held-out rollouts of the best model so far err by "
+                   f"more than {GOOD_SCORE} of the data's spread or fail, up to K trainings in "
+                   f"all; the best is kept (default: {REPEATS}; 1 without held-out trajectories)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
                    "by one standard deviation and quadratic outside it, so that its level sets "
@@ -338,36 +344,6 @@ def _systems_help() -> str:
         )
     except Exception:  # the listing must never break --help
         return "Generate trajectories of a built-in ground-truth system."
-
-
-#: Blocks from this size up are mapped on their own and given back to the system when freed.
-MMAP_THRESHOLD = 1 << 20
-
-
-def return_large_blocks() -> None:
-    """Fix glibc's threshold for blocks mapped on their own (``mallopt(M_MMAP_THRESHOLD)``) at
-    :data:`MMAP_THRESHOLD`, where the user has not set it (``MALLOC_MMAP_THRESHOLD_``,
-    ``GLIBC_TUNABLES``); nothing elsewhere.
-
-    glibc raises the threshold to the size of every mapped block freed (up to 32 MB), after
-    which data-sized arrays of a few MB (a training's states in float32, its pair indices,
-    rollouts) come from the heap, and the heap keeps what they free: on a 400 x 2001 pendulum
-    over 100 MB that no array held, at the peak of ``metriplex train`` (docs/performance.md,
-    'Memory of a training run'). A fixed threshold costs a few hundred more ``mmap`` calls
-    in a run of 26 000. The library itself leaves the process's allocator alone."""
-    import os
-
-    if not sys.platform.startswith("linux") or "MALLOC_MMAP_THRESHOLD_" in os.environ \
-            or "malloc.mmap_threshold" in os.environ.get("GLIBC_TUNABLES", ""):
-        return
-    import ctypes
-
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):  # no C library to ask (or not one with mallopt)
-        return
-    M_MMAP_THRESHOLD = -3
-    mallopt(ctypes.c_int(M_MMAP_THRESHOLD), ctypes.c_int(MMAP_THRESHOLD))
 
 
 def main(argv: list[str] | None = None) -> int:

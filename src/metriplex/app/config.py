@@ -115,6 +115,7 @@ class RunConfig:
     reversible_first: bool | None = None
     hold_energy: bool | None = None
     starts: int | None = None
+    repeats: int | None = None
     confine: bool | None = None
     constant: str = "auto"
 
@@ -240,6 +241,10 @@ def validate(config: RunConfig, n: int) -> None:
         expect_integer(config.starts, least=1, what="--starts",
                        fix="It counts the initialisations tried before the best is trained; "
                            "1 trains the first one only.")
+    if config.repeats is not None:
+        expect_integer(config.repeats, least=1, what="--repeats",
+                       fix="It counts the trainings at most, each from another "
+                           "initialisation while the best so far is poor; 1 trains once.")
     if not 0 <= config.input_noise < 1:
         raise MetriplexError(
             f"--input-noise must be in [0, 1) (a fraction of each variable's standard "

@@ -23,18 +23,17 @@ import numpy as np
 from . import plots
 from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
-from .._model import with_dtype
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
-                     fit_settings, residual_metric_of, stopping_for, units_for)
+                     residual_metric_of, stopping_for, units_for)
+from ._repeats import Training, repeats_for, train_repeats
 from ._report import report_figures
-from ._stages import before_main, left_of, starts_for
+from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
 from ..data import Trajectories
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
-from ..train import Checkpoint, LBFGSFinish, fit
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -253,24 +252,22 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         print(f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
               "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
               "(--degeneracy soft learns it of every variable)", file=sys.stderr)
-    model = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
+    # Built before anything is written: a structure the data cannot take is refused first.
+    first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
     loss = build_loss(config, units, train)
-    if not resume:  # the first stage or the best of --starts initialisations
-        model = before_main(model, config, train, valid, units=units, constant=constant,
-                            given=given, dtype=dtype, model_key=model_key, loss=loss,
-                            key=jr.fold_in(fit_key, 1), progress=progress, max_seconds=budget)
-    model = with_dtype(model, dtype)
     exact_L, exact_M = exact_blocks(config)
     stopping = stopping_for(config)
+    repeats = repeats_for(config, valid)
     header = {
         "config": config.to_json(),
         # What options left at None/"auto" decided: the run's stages, walls and exact blocks.
         "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
-                    "patience": None if stopping is None else stopping.patience},
+                    "patience": None if stopping is None else stopping.patience,
+                    "repeats": repeats},
         "names": list(train.names),
         "n": train.n,
         "train_trajectories": [int(i) for i in train.ids],
@@ -285,32 +282,25 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         "constant_variables": list(constant),
     }
     write_json(out / "config.json", header)
+
+    one = Training(config, train, valid, units=units, constant=constant, given=given,
+                   dtype=dtype, loss=loss, keys=(model_key, fit_key), out=out,
+                   progress=progress, budget=budget, began=began, first=first)
     try:
-        model, history = fit(
-            model,
-            train,
-            loss=loss,
-            validation=valid,
-            # --max-minutes caps both stages together; the main one gets what is left.
-            max_seconds=left_of(budget, began),
-            scale=units.rate,
-            dtype=dtype,
-            progress=progress,
-            checkpoint=Checkpoint(out / "checkpoint.ckpt", every=config.checkpoint_every,
-                                  resume=resume),
-            data_parallel=config.data_parallel,
-            finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
-            input_noise=config.input_noise,
-            key=fit_key,
-            **fit_settings(config),
-        )
+        model, history, outcomes, chosen = train_repeats(
+            one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
+            keep=lambda m, h: (save(out / "model.mpx", m, n=train.n, names=train.names),
+                               write_json(out / "history.json", h.to_json())))
     except TrainingDiverged as e:
         if e.model is not None:
             save(out / "model.mpx", e.model, n=train.n, names=train.names)
         if e.history is not None:
             write_json(out / "history.json", e.history.to_json())
         raise
-    seconds = time.perf_counter() - began  # both stages
+    if len(outcomes) > 1:
+        write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
+                                         "kept_training": chosen})
+    seconds = time.perf_counter() - began  # every stage and training
     save(out / "model.mpx", model, n=train.n, names=train.names,
          extra={"train_seconds": seconds})
     write_json(out / "history.json", history.to_json())

@@ -1,0 +1,230 @@
+"""``--repeats``: train again, from another initialisation, while the held-out rollouts of the
+best model so far are poor, and keep the model that rolls them out best.
+
+Which minimum a training ends in depends on its initialisation more than on anything else a
+user sets: the same data and settings give a good model from one key and a poor one from
+another (docs/zoo.md, *Trained again where the first training is poor*). The held-out
+rollouts that choose the kept step within a training tell the poor ones apart, so training is
+repeated only where they say the model is poor, and a good first training costs nothing more.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
+
+import jax
+import jax.random as jr
+
+from .._errors import TrainingDiverged
+from .._model import with_dtype
+from .._units import Units
+from ..data import Trajectories
+from ..losses import Loss
+from ..train import Checkpoint, LBFGSFinish, fit
+from ._build import Given, build_model, fit_settings
+from ._stages import before_main, left_of
+from .config import RunConfig
+
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+
+    from .._model import GenericModel
+    from .._train import History
+
+#: The trainings at most (``--repeats`` left out) where there are held-out trajectories.
+REPEATS = 3
+#: A model whose held-out rollouts err by at most this much (the root mean square over the
+#: rollout check's windows, in units of each variable's standard deviation over the data),
+#: none of them failing, is good: training is not repeated after it.
+GOOD_SCORE = 0.1
+
+
+def repeats_for(config: RunConfig, valid: Trajectories | None) -> int:
+    """The trainings at most: ``--repeats``, left out :data:`REPEATS`; 1 without held-out
+    trajectories (nothing to judge a training by)."""
+    if valid is None:
+        return 1
+    return REPEATS if config.repeats is None else config.repeats
+
+
+def checkpoint_path(out: Path, repeat: int) -> Path:
+    """Training ``repeat``'s checkpoint (0 based): the first one's is ``checkpoint.ckpt``, as
+    without repeats; the second's ``checkpoint-2.ckpt``, and so on."""
+    return out / ("checkpoint.ckpt" if repeat == 0 else f"checkpoint-{repeat + 1}.ckpt")
+
+
+@dataclasses.dataclass(frozen=True)
+class Training:
+    """One training of a run, called as ``training(r, resumed)``: training ``r`` (0 based; the
+    first from the run's own ``keys``, ``(model key, fit key)``, the others from keys folded
+    with ``r``) of the model ``config`` describes, from its checkpoint where ``resumed``, else
+    from the first stage or the best of ``--starts`` initialisations; ``(best model,
+    history)`` as :func:`~metriplex.fit` returns them. ``budget`` (seconds, counted from the
+    ``time.perf_counter()`` reading ``began``) caps every stage and training together.
+    ``first``: training 0's untrained model, built by the caller before it writes anything to
+    the run folder, so that a structure the data cannot take is refused with nothing written."""
+
+    config: RunConfig
+    train: Trajectories
+    valid: Trajectories | None
+    units: Units
+    constant: tuple[int, ...]
+    given: Given
+    dtype: DTypeLike
+    loss: Loss
+    keys: tuple[jax.Array, jax.Array]
+    out: Path
+    progress: bool
+    budget: float | None
+    began: float
+    first: GenericModel
+
+    def __call__(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
+        config, train, valid = self.config, self.train, self.valid
+        m_key, f_key = self.keys if r == 0 else tuple(jr.fold_in(k, r) for k in self.keys)
+        model = self.first if r == 0 else build_model(
+            config, train, key=m_key, units=self.units, constant=self.constant, given=self.given)
+        if not resumed:
+            model = before_main(model, config, train, valid, units=self.units,
+                                constant=self.constant, given=self.given, dtype=self.dtype,
+                                model_key=m_key, loss=self.loss, key=jr.fold_in(f_key, 1),
+                                progress=self.progress,
+                                max_seconds=left_of(self.budget, self.began))
+        return fit(
+            with_dtype(model, self.dtype), train, loss=self.loss, validation=valid,
+            max_seconds=left_of(self.budget, self.began), scale=self.units.rate,
+            dtype=self.dtype, progress=self.progress,
+            checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
+                                  resume=resumed),
+            data_parallel=config.data_parallel,
+            finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
+            input_noise=config.input_noise, key=f_key, **fit_settings(config))
+
+
+@dataclasses.dataclass(frozen=True)
+class Outcome:
+    """How one training ended: the held-out rollout ``score`` and ``failures`` of its kept
+    model (``score`` infinite where it diverged or was not judged), its ``best_step``, how it
+    ``stopped``, its wall time in ``seconds`` (with the stages before the main one), whether
+    its stopping rule ended it (``converged``) and whether it ``diverged``."""
+
+    score: float
+    failures: int
+    best_step: int
+    stopped: str
+    seconds: float
+    converged: bool = False
+    diverged: bool = False
+
+    @classmethod
+    def of(cls, history: History, seconds: float) -> Outcome:
+        score = history.best_rollout
+        return cls(score=score if math.isfinite(score) else math.inf,
+                   failures=max(history.best_rollout_failures, 0),
+                   best_step=history.best_step, stopped=history.stopped, seconds=seconds,
+                   converged=history.converged)
+
+    @property
+    def good(self) -> bool:
+        """Held-out rollouts within :data:`GOOD_SCORE`, none failing."""
+        return self.failures == 0 and self.score <= GOOD_SCORE
+
+    def rank(self) -> tuple[int, float]:
+        """Fewer failed held-out rollouts first, then the lower score."""
+        return self.failures, self.score
+
+    def to_json(self) -> dict[str, Any]:
+        return {**dataclasses.asdict(self),
+                "score": self.score if math.isfinite(self.score) else None}
+
+
+def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, repeats: int,
+                  out: Path, resume: bool, budget: float | None, began: float,
+                  keep: Callable[[GenericModel, History], None],
+                  ) -> tuple[GenericModel, History, list[Outcome], int]:
+    """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
+    ``resume`` and training ``r`` left a checkpoint); the next runs only while the best so far
+    is not :attr:`Outcome.good`, the last one converged or diverged (one that a step budget
+    ended wants more steps, not another start), the wall-time ``budget`` (seconds from
+    ``began``) lasts and no training was interrupted. Returns ``(best model, its history,
+    every training's outcome, the index of the best)``. ``keep(model, history)`` saves each
+    new best before the next training, so that an interruption never loses it. A training
+    that diverges counts as a failed one; where all diverge, the last error is raised."""
+    best: tuple[GenericModel, History, Outcome] | None = None
+    chosen = 0
+    outcomes: list[Outcome] = []
+    diverged: TrainingDiverged | None = None
+    for r in range(repeats):
+        if r and _enough(best, outcomes[-1], budget, began):
+            break
+        if r:
+            print(_again_line(r, repeats, best), file=sys.stderr)
+        start = time.perf_counter()
+        try:
+            model, history = one(r, resume and checkpoint_path(out, r).is_file())
+        except TrainingDiverged as e:
+            diverged = e
+            outcomes.append(Outcome(math.inf, 0, 0, str(e), time.perf_counter() - start,
+                                    diverged=True))
+            continue
+        except KeyboardInterrupt:
+            if best is None:
+                raise
+            # Ctrl-C before training r's first checkpoint (in its first stage): the best
+            # model so far is the run's; --resume goes on with training r from its start.
+            best[1].stopped = f"interrupted in training {r + 1}"
+            break
+        outcome = Outcome.of(history, time.perf_counter() - start)
+        outcomes.append(outcome)
+        if best is None or outcome.rank() < best[2].rank():
+            best, chosen = (model, history, outcome), r
+            if r + 1 < repeats:
+                keep(model, history)
+        if history.stopped.startswith("interrupted"):
+            if best[1] is not history:  # the run stops here: say so on the kept history
+                best[1].stopped = f"{history.stopped} of training {r + 1}"
+            break
+    if best is None:
+        assert diverged is not None
+        raise diverged
+    return best[0], best[1], outcomes, chosen
+
+
+def _enough(best: tuple[Any, History, Outcome] | None, last: Outcome, budget: float | None,
+            began: float) -> bool:
+    if best is not None and (best[2].good or best[1].stopped.startswith("interrupted")):
+        return True
+    if not (last.converged or last.diverged):
+        return True
+    return budget is not None and time.perf_counter() - began >= budget
+
+
+def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None) -> str:
+    if best is None:
+        why = "every training so far diverged"
+    else:
+        o = best[2]
+        why = (f"{o.failures} held-out rollout(s) of the best model so far failed"
+               if o.failures else
+               f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
+               f"data's spread (good: <= {GOOD_SCORE})")
+    return (f"repeats: {why}; training {r + 1} of at most {repeats} from another "
+            "initialisation (--repeats 1: one training only)")
+
+
+def trainings_note(header: dict) -> str:
+    """The words train's final line adds where more than one training ran, from the run's
+    ``config.json`` (``header``; its ``trainings`` and ``kept_training``); else ``""``."""
+    trainings = header.get("trainings") or []
+    if len(trainings) < 2:
+        return ""
+    scores = ", ".join("diverged" if o.get("diverged") else (
+        "not judged" if o.get("score") is None else f"{o['score']:.3g}")
+        + (f" ({o['failures']} failed)" if o.get("failures") else "") for o in trainings)
+    return (f"kept training {header.get('kept_training', 0) + 1} of {len(trainings)} "
+            f"(held-out rollout errors, in units of the data's spread: {scores})")

@@ -1,0 +1,134 @@
+"""``--repeats``: training again from another initialisation while the held-out rollouts of the
+best model so far are poor, and keeping the best."""
+
+import dataclasses
+import json
+import math
+
+import pytest
+
+from metriplex import MetriplexError, TrainingDiverged
+from metriplex._train import History
+from metriplex.app import _repeats
+from metriplex.app.config import RunConfig, preset, validate
+from metriplex.app.runs import train_run
+from metriplex.systems import generate, get_system
+
+
+def _history(score, *, failures=0, converged=True, stopped="converged at step 100"):
+    return History(step=[0, 100], best_step=100, best_rollout=score,
+                   best_rollout_failures=failures, converged=converged, stopped=stopped)
+
+
+def _run(results, tmp_path, repeats=3, budget=None):
+    """train_repeats over fake trainings: each entry of ``results`` a History, an exception
+    to raise, or a callable of the call count."""
+    calls, kept = [], []
+
+    def one(r, resumed):
+        calls.append((r, resumed))
+        got = results[r]
+        if isinstance(got, BaseException):
+            raise got
+        return f"model {r}", got
+
+    model, history, outcomes, chosen = _repeats.train_repeats(
+        one, repeats=repeats, out=tmp_path, resume=False, budget=budget, began=0.0,
+        keep=lambda m, h: kept.append(m))
+    return model, history, outcomes, chosen, calls, kept
+
+
+def test_a_good_first_training_is_not_repeated(tmp_path, capsys):
+    model, _, outcomes, chosen, calls, kept = _run([_history(0.05)], tmp_path)
+    assert (model, chosen, len(outcomes)) == ("model 0", 0, 1)
+    assert calls == [(0, False)] and kept == ["model 0"]
+    assert "repeats:" not in capsys.readouterr().err
+
+
+def test_poor_trainings_are_repeated_and_the_best_is_kept(tmp_path, capsys):
+    poor = [_history(1.3), _history(0.4), _history(0.9)]
+    model, history, outcomes, chosen, calls, kept = _run(poor, tmp_path)
+    assert [r for r, _ in calls] == [0, 1, 2]
+    assert (model, chosen) == ("model 1", 1) and history is poor[1]
+    assert [o.score for o in outcomes] == [1.3, 0.4, 0.9]
+    # Each new best is saved before the next training; the last one is the caller's to save.
+    assert kept == ["model 0", "model 1"]
+    err = capsys.readouterr().err
+    assert "err by 1.3 of the data's spread" in err and "training 3 of at most 3" in err
+
+
+def test_failed_held_out_rollouts_rank_below_any_score(tmp_path):
+    runs = [_history(0.2, failures=1), _history(0.9), _history(0.5, failures=2)]
+    model, *_ = _run(runs, tmp_path)
+    assert model == "model 1"
+
+
+def test_no_repeat_after_a_training_that_a_step_budget_ended(tmp_path):
+    # It wants more steps, not another start.
+    unconverged = _history(0.9, converged=False, stopped="step budget reached (60 steps)")
+    *_, calls, _ = _run([unconverged, _history(0.01)], tmp_path)
+    assert len(calls) == 1
+
+
+def test_no_repeat_once_the_wall_time_budget_is_spent(tmp_path):
+    *_, calls, _ = _run([_history(0.9), _history(0.01)], tmp_path, budget=1e-9)
+    assert len(calls) == 1
+
+
+def test_a_diverged_training_counts_as_failed_and_only_all_diverged_raises(tmp_path):
+    boom = TrainingDiverged("training diverged at step 5")
+    model, _, outcomes, chosen, _, _ = _run([boom, _history(0.3), _history(0.05)], tmp_path)
+    assert (model, chosen) == ("model 2", 2)
+    assert outcomes[0].diverged and outcomes[0].to_json()["score"] is None
+    with pytest.raises(TrainingDiverged, match="step 5"):
+        _run([boom, boom], tmp_path, repeats=2)
+
+
+def test_an_interrupted_training_ends_the_repeats_and_says_so_on_the_kept_history(tmp_path):
+    first = _history(0.5)
+    cut = _history(0.2, converged=False, stopped="interrupted at step 40")
+    cut.best_rollout_failures = 3  # worse than the first: the first stays kept
+    model, history, outcomes, _, calls, _ = _run([first, cut, _history(0.01)], tmp_path)
+    assert model == "model 0" and len(calls) == 2
+    assert history.stopped == "interrupted at step 40 of training 2"
+    # Ctrl-C in a later training's first stage: the best so far is kept, marked interrupted.
+    model, history, *_ = _run([_history(0.5), KeyboardInterrupt()], tmp_path)
+    assert model == "model 0" and history.stopped == "interrupted in training 2"
+    with pytest.raises(KeyboardInterrupt):
+        _run([KeyboardInterrupt()], tmp_path)
+
+
+def test_repeats_default_needs_held_out_trajectories_and_presets_train_once():
+    assert _repeats.repeats_for(RunConfig(), valid="held out") == _repeats.REPEATS
+    assert _repeats.repeats_for(RunConfig(), valid=None) == 1
+    assert _repeats.repeats_for(RunConfig(repeats=5), valid="held out") == 5
+    assert preset("gas-containers").repeats == 1  # tuned and measured with one training
+    for bad in (0, -1, 2.5):
+        with pytest.raises(MetriplexError, match="--repeats"):
+            validate(RunConfig(repeats=bad), 3)
+
+
+def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(tmp_path, capsys,
+                                                                           monkeypatch):
+    # Every model is "poor" (good only at a score <= 0): two short trainings that converge
+    # (one learning-rate cut, patience 1), the better one kept and saved.
+    monkeypatch.setattr(_repeats, "GOOD_SCORE", 0.0)
+    data = generate(get_system("oscillator-bath"), trajectories=5, steps=20, seed=0)
+    config = RunConfig(poisson="canonical:1", entropy="sum:2", width=8, steps=400,
+                       eval_every=10, patience=1, lr_cuts=0, average_steps=0,
+                       reversible_first=False, repeats=2, validation=0.2)
+    out = tmp_path / "run"
+    model, history, *_ = train_run(data, config, out, progress=False)
+    header = json.loads((out / "config.json").read_text())
+    assert header["decided"]["repeats"] == 2 and len(header["trainings"]) == 2
+    scores = [t["score"] for t in header["trainings"]]
+    assert history.best_rollout == min(scores) == scores[header["kept_training"]]
+    assert scores[0] != scores[1]  # another initialisation, another model
+    assert (out / "checkpoint.ckpt").is_file() and (out / "checkpoint-2.ckpt").is_file()
+    assert "training 2 of at most 2" in capsys.readouterr().err
+    # --resume of a finished run finds both trainings done and keeps the same model.
+    again, history2, *_ = train_run(data, config, out, resume=True, progress=False)
+    assert history2.best_rollout == history.best_rollout
+    assert json.loads((out / "config.json").read_text())["kept_training"] == \
+        header["kept_training"]
+    assert dataclasses.asdict(RunConfig(repeats=2))["repeats"] == 2
