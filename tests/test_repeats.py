@@ -39,10 +39,14 @@ def _run(results, tmp_path, repeats=3, budget=None):
 
 
 def test_a_good_first_training_is_not_repeated(tmp_path, capsys):
-    model, _, outcomes, chosen, calls, kept = _run([_history(0.05)], tmp_path)
+    model, _, outcomes, chosen, calls, kept = _run([_history(0.01)], tmp_path)
     assert (model, chosen, len(outcomes)) == ("model 0", 0, 1)
     assert calls == [(0, False)] and kept == ["model 0"]
     assert "repeats:" not in capsys.readouterr().err
+    # The threshold decides: at it, one training; just above it, another.
+    assert len(_run([_history(_repeats.GOOD_SCORE)], tmp_path)[4]) == 1
+    above = _history(_repeats.GOOD_SCORE * 1.01)
+    assert len(_run([above, _history(0.001)], tmp_path)[4]) == 2
 
 
 def test_poor_trainings_are_repeated_and_the_best_is_kept(tmp_path, capsys):
@@ -66,18 +70,18 @@ def test_failed_held_out_rollouts_rank_below_any_score(tmp_path):
 def test_no_repeat_after_a_training_that_a_step_budget_ended(tmp_path):
     # It wants more steps, not another start.
     unconverged = _history(0.9, converged=False, stopped="step budget reached (60 steps)")
-    *_, calls, _ = _run([unconverged, _history(0.01)], tmp_path)
+    *_, calls, _ = _run([unconverged, _history(0.001)], tmp_path)
     assert len(calls) == 1
 
 
 def test_no_repeat_once_the_wall_time_budget_is_spent(tmp_path):
-    *_, calls, _ = _run([_history(0.9), _history(0.01)], tmp_path, budget=1e-9)
+    *_, calls, _ = _run([_history(0.9), _history(0.001)], tmp_path, budget=1e-9)
     assert len(calls) == 1
 
 
 def test_a_diverged_training_counts_as_failed_and_only_all_diverged_raises(tmp_path):
     boom = TrainingDiverged("training diverged at step 5")
-    model, _, outcomes, chosen, _, _ = _run([boom, _history(0.3), _history(0.05)], tmp_path)
+    model, _, outcomes, chosen, _, _ = _run([boom, _history(0.3), _history(0.01)], tmp_path)
     assert (model, chosen) == ("model 2", 2)
     assert outcomes[0].diverged and outcomes[0].to_json()["score"] is None
     with pytest.raises(TrainingDiverged, match="step 5"):
@@ -88,7 +92,7 @@ def test_an_interrupted_training_ends_the_repeats_and_says_so_on_the_kept_histor
     first = _history(0.5)
     cut = _history(0.2, converged=False, stopped="interrupted at step 40")
     cut.best_rollout_failures = 3  # worse than the first: the first stays kept
-    model, history, outcomes, _, calls, _ = _run([first, cut, _history(0.01)], tmp_path)
+    model, history, outcomes, _, calls, _ = _run([first, cut, _history(0.001)], tmp_path)
     assert model == "model 0" and len(calls) == 2
     assert history.stopped == "interrupted at step 40 of training 2"
     # Ctrl-C in a later training's first stage: the best so far is kept, marked interrupted.

@@ -40,8 +40,10 @@ if TYPE_CHECKING:
 REPEATS = 3
 #: A model whose held-out rollouts err by at most this much (the root mean square over the
 #: rollout check's windows, in units of each variable's standard deviation over the data),
-#: none of them failing, is good: training is not repeated after it.
-GOOD_SCORE = 0.1
+#: none of them failing, is good: training is not repeated after it. 2 % of the spread, the
+#: accuracy the zoo's bar asks; 0.1 left charged-particle at one training and 4.5e-2 where
+#: this trains it twice to 1.9e-2, and no zoo case lost (docs/zoo.md).
+GOOD_SCORE = 0.02
 
 
 def repeats_for(config: RunConfig, valid: Trajectories | None) -> int:
