@@ -145,7 +145,8 @@ def cosine_lbfgs_run(tmp_path_factory):
 SHARED_TRAININGS = {
     "trained_run": ("tests/test_cli.py::", "tests/test_rollout_ids.py::",
                     "tests/test_trajectory_selection.py::",
-                    "tests/test_train.py::test_cli_divergence_keeps_the_best_model"),
+                    "tests/test_train.py::test_cli_divergence_keeps_the_best_model",
+                    "tests/test_repeats.py::test_a_run_trains_again"),
     "cosine_lbfgs_run": ("tests/test_lbfgs.py::", "tests/test_schedule.py::"),
 }
 

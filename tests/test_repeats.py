@@ -1,18 +1,16 @@
 """``--repeats``: training again from another initialisation while the held-out rollouts of the
 best model so far are poor, and keeping the best."""
 
-import dataclasses
 import json
-import math
 
 import pytest
 
+import metriplex as mx
 from metriplex import MetriplexError, TrainingDiverged
 from metriplex._train import History
 from metriplex.app import _repeats
 from metriplex.app.config import RunConfig, preset, validate
 from metriplex.app.runs import train_run
-from metriplex.systems import generate, get_system
 
 
 def _history(score, *, failures=0, converged=True, stopped="converged at step 100"):
@@ -112,27 +110,28 @@ def test_repeats_default_needs_held_out_trajectories_and_presets_train_once():
             validate(RunConfig(repeats=bad), 3)
 
 
-def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(tmp_path, capsys,
-                                                                           monkeypatch):
-    # Every model is "poor" (good only at a score <= 0): two short trainings that converge
-    # (one learning-rate cut, patience 1), the better one kept and saved.
+def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(trained_run, tmp_path,
+                                                                           capsys, monkeypatch):
+    # The data and structure of the session's shared run (tests/conftest.py), whose worker has
+    # compiled them already; every model "poor" (good only at a score <= 0): two short
+    # trainings that converge (patience 1, no learning-rate cut), the better one kept.
     monkeypatch.setattr(_repeats, "GOOD_SCORE", 0.0)
-    data = generate(get_system("oscillator-bath"), trajectories=5, steps=20, seed=0)
+    data = mx.read(trained_run / "data.npz")
     config = RunConfig(poisson="canonical:1", entropy="sum:2", width=8, steps=400,
-                       eval_every=10, patience=1, lr_cuts=0, average_steps=0,
-                       reversible_first=False, repeats=2, validation=0.2)
+                       eval_every=10, patience=1, lr_cuts=0, repeats=2)
     out = tmp_path / "run"
-    model, history, *_ = train_run(data, config, out, progress=False)
+    split = dict(trajectories=range(6), validation_ids=[4, 5])
+    model, history, *_ = train_run(data, config, out, progress=False, **split)
     header = json.loads((out / "config.json").read_text())
     assert header["decided"]["repeats"] == 2 and len(header["trainings"]) == 2
     scores = [t["score"] for t in header["trainings"]]
+    assert all(t["converged"] for t in header["trainings"])
     assert history.best_rollout == min(scores) == scores[header["kept_training"]]
     assert scores[0] != scores[1]  # another initialisation, another model
     assert (out / "checkpoint.ckpt").is_file() and (out / "checkpoint-2.ckpt").is_file()
     assert "training 2 of at most 2" in capsys.readouterr().err
     # --resume of a finished run finds both trainings done and keeps the same model.
-    again, history2, *_ = train_run(data, config, out, resume=True, progress=False)
-    assert history2.best_rollout == history.best_rollout
+    _, again, *_ = train_run(data, config, out, resume=True, progress=False, **split)
+    assert again.best_rollout == history.best_rollout
     assert json.loads((out / "config.json").read_text())["kept_training"] == \
         header["kept_training"]
-    assert dataclasses.asdict(RunConfig(repeats=2))["repeats"] == 2
