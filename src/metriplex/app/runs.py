@@ -26,7 +26,7 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      residual_metric_of, stopping_for, units_for)
-from ._repeats import Training, repeats_for, train_repeats
+from ._repeats import Training, checkpoint_path, repeats_for, train_repeats
 from ._report import report_figures
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
@@ -49,7 +49,7 @@ def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool =
     check_output_folder(out)
     check_not_in_use(out)
     if resume:
-        if not (out / "checkpoint.ckpt").is_file():
+        if not checkpoint_path(out, 0).is_file():
             raise MetriplexError(
                 f"cannot resume: {str(out)!r} holds no checkpoint.ckpt. Start a new run without "
                 "--resume."
