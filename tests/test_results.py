@@ -41,7 +41,12 @@ def test_train_summary_counts_failed_rollouts_and_says_when_nothing_was_learned(
     # line does not call it untrained, and names the stall as the cause to rule out.
     assert "NO trained" not in staged and "untrained one" not in staged
     assert "the main stage's start (the first stage's model" in staged
-    assert "another --seed, or --no-reversible-first" in staged
+    assert "try another --seed; try --no-reversible-first" in staged
+    # Where --repeats trained from other initialisations already, the line says so instead.
+    repeated = train_summary(_history(0, 5000, True, "converged at step 5000"), metrics, 12.0,
+                             Path("run"), trainings="kept training 1 of 3 (...)")
+    assert "another --seed" not in repeated
+    assert "poor fit (other initialisations did no better)" in repeated
 
 
 def test_train_summary_says_when_the_budget_ended_training_before_convergence():
@@ -82,6 +87,10 @@ def test_train_summary_says_when_the_model_kept_is_barely_trained():
     line = train_summary(history(700, lost), metrics, 40.0, Path("run"))
     assert "the model of step 700 of 13800 was kept" in line
     assert "median score 62 against 1.5" in line and "barely trained" in line
+    assert "(try another --seed)" in line
+    again = train_summary(history(700, lost), metrics, 40.0, Path("run"),
+                          trainings="kept training 2 of 3 (...)")
+    assert "degraded it (other initialisations did no better)" in again
     staged = train_summary(history(700, lost), metrics, 40.0, Path("run"), first_stage=True)
     assert "the main stage's model of step 700 of 13800 was kept" in staged
     assert "friction added to the first stage's model may be barely trained" in staged

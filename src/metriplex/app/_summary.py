@@ -25,21 +25,22 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     ended = history.stopped or "completed"
     if not history.converged and history.best_step == last and last > 0:
         ended += "; the best model is the last one: not converged, allow more --steps"
+    # Where --repeats trained from other initialisations already, another --seed is no advice.
+    reseed = "other initialisations did no better" if trainings else "try another --seed"
     if history.best_step == 0 and last > 0:
         if first_stage:  # the main stage starts from the first stage's E and L: a trained model
             ended += ("; the main stage's start (the first stage's model with an untrained "
                       "friction) rolled out the held-out trajectories best (kept); if its "
-                      "error below is poor, the first stage can have stalled: try another "
-                      "--seed, or --no-reversible-first")
+                      f"error below is poor, the first stage can have stalled: {reseed}; "
+                      "try --no-reversible-first")
         else:
             ended += ("; NO trained model rolled out the held-out trajectories better than "
                       "the untrained one (kept): either the data do not determine the "
                       "dynamics away from the training trajectories (give more trajectories or "
-                      "more of the structure), or training ended in a poor fit (try another "
-                      "--seed)")
+                      f"more of the structure), or training ended in a poor fit ({reseed})")
     if trainings:
         ended += f"; {trainings}"
-    early = kept_early(history, first_stage)
+    early = kept_early(history, first_stage, reseed)
     if early:
         ended += early
     k = metrics.get("trajectories", 0)
@@ -65,14 +66,16 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
-def kept_early(history: History, first_stage: bool) -> str:
+def kept_early(history: History, first_stage: bool,
+               reseed: str = "try another --seed") -> str:
     """A clause for train's line where the model kept is an early one that the later models
     lost to: kept within the first tenth of the steps, and the later evaluations' held-out
     rollout scores at a median of more than twice its own. Its error can then look fair (a
     model that barely moves stays near the data) while it has hardly learned the dynamics.
     After a first stage, the main stage's early model is the first stage's, trained, plus a
     little friction: the clause says that instead. The scores are read as far as both lists
-    go (after a divergence the steps have one more entry than the scores)."""
+    go (after a divergence the steps have one more entry than the scores). ``reseed``: the
+    advice on the initialisation (a run that trained from others already says so)."""
     best, last = history.best_step, history.step[-1] if history.step else 0
     if not (0 < best <= last / 10) or not history.rollout:
         return ""
@@ -91,4 +94,4 @@ def kept_early(history: History, first_stage: bool) -> str:
     return (f"; the model of step {best} of {last} was kept: {worse}, so it may be barely "
             "trained and its error below says little about the dynamics: the data may not "
             "determine them away from the training trajectories (give more trajectories or "
-            "more of the structure), or later training degraded it (try another --seed)")
+            f"more of the structure), or later training degraded it ({reseed})")
