@@ -111,7 +111,7 @@ def test_exchange_friction_round_trips_a_model_file(tmp_path):
 def test_training_with_the_command_line_spelling(tmp_path):
     data = generate("oscillator-bath", trajectories=6, steps=40, seed=0)
     config = RunConfig(poisson="canonical:1", entropy="sum:2", friction="exchange", steps=200,
-                       eval_every=50, average_steps=0, validation=0.34,
+                       eval_every=50, average_steps=0, validation=0.0,
                        reversible_first=False)
     model, history, _, _, _ = train_run(data, config, tmp_path / "run", progress=False)
     assert type(model.friction) is ExchangeFriction

@@ -156,7 +156,7 @@ def test_training_with_the_command_line_spelling(tmp_path):
                     seed=0)
     config = RunConfig(poisson="canonical:3", entropy="sum:6,7,8", energy="local:3",
                        friction="local:3", width=16, steps=60, eval_every=30,
-                       average_steps=0, validation=0.25, reversible_first=False)
+                       average_steps=0, validation=0.0, reversible_first=False)
     model, history, _, _, _ = train_run(data, config, tmp_path / "run", progress=False)
     assert type(model.energy) is LocalPotential and type(model.friction) is LocalFriction
     assert "degeneracy_M" not in history.train  # exact: no penalty to weigh
