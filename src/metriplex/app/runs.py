@@ -13,7 +13,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -283,27 +283,28 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     }
     write_json(out / "config.json", header)
 
+    def keep(model: GenericModel | None, history: History | None, **extra: Any) -> None:
+        """Write the run's model and history (each where given)."""
+        if model is not None:
+            save(out / "model.mpx", model, n=train.n, names=train.names, extra=extra or None)
+        if history is not None:
+            write_json(out / "history.json", history.to_json())
+
     one = Training(config, train, valid, units=units, constant=constant, given=given,
                    dtype=dtype, loss=loss, keys=(model_key, fit_key), out=out,
                    progress=progress, budget=budget, began=began, first=first)
     try:
         model, history, outcomes, chosen = train_repeats(
             one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
-            keep=lambda m, h: (save(out / "model.mpx", m, n=train.n, names=train.names),
-                               write_json(out / "history.json", h.to_json())))
+            keep=keep)
     except TrainingDiverged as e:
-        if e.model is not None:
-            save(out / "model.mpx", e.model, n=train.n, names=train.names)
-        if e.history is not None:
-            write_json(out / "history.json", e.history.to_json())
+        keep(e.model, e.history)
         raise
     if len(outcomes) > 1:
         write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
                                          "kept_training": chosen})
     seconds = time.perf_counter() - began  # every stage and training
-    save(out / "model.mpx", model, n=train.n, names=train.names,
-         extra={"train_seconds": seconds})
-    write_json(out / "history.json", history.to_json())
+    keep(model, history, train_seconds=seconds)
     plots.save_figure(
         plots.loss_curves(history), out / "figures" / "loss",
         step=np.asarray(history.step),
