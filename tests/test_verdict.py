@@ -205,7 +205,8 @@ def test_all_rollouts_failing_gives_cannot_tell_and_no_zero_figures(pumped, tmp_
     m = json.loads((tmp_path / "metrics.json").read_text(), parse_constant=refuse)
     failed = ["rollout_error_mean", "rollout_error_mean_completed", "energy_relative_drift",
               "energy_drift_over_data_spread", "entropy_min_step",
-              "entropy_negative_step_fraction", "entropy_production_negative_fraction"]
+              "entropy_negative_step_fraction", "entropy_step_rounding",
+              "entropy_production_negative_fraction"]
     for key in failed:
         assert m[key] is None, key
         assert m["null_reasons"][key], key

@@ -166,7 +166,8 @@ def run_experiment(
     metrics.update(_figures_and_gauge(exp, system, model, test, out / "figures", scheme,
                                       rollout, truth_rollout))
     metrics["bars"] = {
-        k: {"target": v, "value": metrics.get(k), "met": _met(k, metrics.get(k), v)}
+        k: {"target": v, "value": metrics.get(k),
+            "met": _met(k, metrics.get(k), v, metrics.get("entropy_step_rounding"))}
         for k, v in exp.bars.items()
     }
     write_json(out / "metrics.json", metrics)
@@ -183,6 +184,8 @@ def run_experiment(
     for k, b in metrics["bars"].items():
         value = "null (" + metrics.get("null_reasons", {}).get(k, "not computed") + ")" \
             if b["value"] is None else _fmt(b["value"])
+        if k == "entropy_min_step" and b["value"] is not None and b["value"] < 0:
+            value += f" (rounding of S: {_fmt(metrics.get('entropy_step_rounding'))})"
         print(f"  {k}: {value} vs {'full-run ' if quick else ''}target "
               f"{b['target']:.0e}: {'met' if b['met'] else 'NOT met'}")
     for line in structure_warnings(metrics):
@@ -190,11 +193,11 @@ def run_experiment(
     return metrics
 
 
-def _met(key, value, target):
+def _met(key, value, target, rounding=None):
     if value is None:
         return False
-    if key == "entropy_min_step":
-        return value >= -1e-12
+    if key == "entropy_min_step":  # never decreasing, beyond the rounding of S
+        return value >= -(1e-12 if rounding is None else rounding)
     return value <= target
 
 
