@@ -278,6 +278,21 @@ def test_a_step_whose_solve_fails_is_retaken_in_substeps_when_asked():
         solve(STIFF, x1, TS_STIFF, retry=-1)
 
 
+def test_a_step_whose_substeps_fail_is_retaken_once_more_in_the_square_of_them():
+    # k dt = 40: in 8 substeps the fixed point still diverges (k dt / 16 = 2.5); in 64 it
+    # converges (k dt / 128 < 1), and the step is exactly 64 CN substeps. At k dt = 400 the
+    # 64 substeps diverge too, and the rollout fails: two retries, no more.
+    x1 = jnp.array([[1.0], [0.5]])
+    scheme = CrankNicolson(root_finder=FixedPoint())
+    out = solve(STIFF, x1, 8 * TS_STIFF, scheme=scheme, retry=8)
+    assert out.ok
+    growth = ((1 - 40 / 128) / (1 + 40 / 128)) ** 64
+    exact = np.asarray(x1) * growth ** np.arange(11)[None, :]
+    np.testing.assert_allclose(np.asarray(out.xs)[..., 0], exact, rtol=1e-9, atol=1e-12)
+    assert np.asarray(solve(STIFF, x1, 80 * TS_STIFF, scheme=scheme,
+                            retry=8).failed_step).tolist() == [1, 1]
+
+
 def test_rollouts_with_and_without_retry_are_one_compiled_program(caplog):
     # The retry's substeps are rounds of the step that the first attempt takes, and the
     # number of substeps is traced: training's held-out rollouts (no retry) and the

@@ -21,8 +21,12 @@ from .crank_nicolson import CrankNicolson
 
 
 #: The substeps in which evaluations and ``metriplex rollout`` retake a step whose solve failed
-#: (``solve(retry=...)``).
+#: (``solve(retry=...)``), and, where one of those fails too, the square of it.
 RETRY_SUBSTEPS = 8
+
+#: How many times a failed step is retaken, each time from its start in ``retry`` times more
+#: substeps than the last attempt: ``retry``, then ``retry ** 2``.
+RETRY_LEVELS = 2
 
 
 class Rollout(NamedTuple):
@@ -103,7 +107,8 @@ def _rollout(model, scheme, x0, ts, retry):
 def _step_or_retry(model, scheme, x, h, guess, retry):
     """One step of the batch; a row whose solve fails is taken again from ``x`` as ``retry``
     equal substeps (those of :class:`~metriplex.systems.Substeps`: the first from ``x``, each
-    next one from the last state plus the last increment), and fails if one of them fails.
+    next one from the last state plus the last increment); where one of them fails, again from
+    ``x`` as ``retry ** 2`` substeps (:data:`RETRY_LEVELS`), and fails if one of those fails.
 
     The scheme's step appears once in the program, in a loop whose rounds are the first
     attempt and then the substeps (each row at its own stage; a row that is done takes zero
@@ -115,26 +120,28 @@ def _step_or_retry(model, scheme, x, h, guess, retry):
     dtype = jnp.asarray(0).dtype
 
     def round_(state):
-        y, dy, left, step, ok, its, retrying = state
+        y, dy, left, step, ok, its, level = state
         active = left > 0
         z, ok1, its1 = scheme.step_batch(model, y, jnp.where(active, step, 0.0),
                                          jnp.where(active[:, None], y + dy, y))
         done = active & ok1
-        first_failure = active & ~ok1 & ~retrying & (retry > 0)
-        failed = active & ~ok1 & ~first_failure
+        # A failed attempt starts the step again from x, in retry times more substeps.
+        again = active & ~ok1 & (level < RETRY_LEVELS) & (retry > 0)
+        failed = active & ~ok1 & ~again
+        substeps = jnp.maximum(retry, 1) ** (level + 1)
         a = done[:, None]
-        return (jnp.where(first_failure[:, None], x, jnp.where(a, z, y)),
-                jnp.where(first_failure[:, None], 0.0, jnp.where(a, z - y, dy)),
-                jnp.where(first_failure, retry,
+        return (jnp.where(again[:, None], x, jnp.where(a, z, y)),
+                jnp.where(again[:, None], 0.0, jnp.where(a, z - y, dy)),
+                jnp.where(again, substeps,
                           jnp.where(done, left - 1, jnp.where(failed, 0, left))),
-                jnp.where(first_failure, h / jnp.maximum(retry, 1).astype(h.dtype), step),
+                jnp.where(again, h / substeps.astype(h.dtype), step),
                 ok & ~failed,
                 its + jnp.where(active, jnp.asarray(its1, dtype), 0),
-                retrying | first_failure)
+                level + again.astype(dtype))
 
     # one round for each row that moves; the first round's guess is the predictor (y + dy)
     init = (x, guess - x, (h > 0).astype(dtype), h, jnp.ones(x.shape[:1], bool),
-            jnp.zeros(x.shape[:1], dtype), jnp.zeros(x.shape[:1], bool))
+            jnp.zeros(x.shape[:1], dtype), jnp.zeros(x.shape[:1], dtype))
     y, _, _, _, ok, its, _ = jax.lax.while_loop(lambda s: jnp.any(s[2] > 0), round_, init)
     return y, ok, its
 
@@ -221,10 +228,10 @@ def solve(
     states computed up to there in ``.partial``.
 
     ``retry``: a step whose solve does not converge (or whose state is not finite) is taken
-    again as ``retry`` equal substeps, from the same state, before the trajectory is marked
-    failed (0, the default: never). A model that blows up fails either way; one whose field is
-    merely stiff somewhere goes on. ``metriplex.evaluate`` and ``metriplex rollout`` use
-    :data:`RETRY_SUBSTEPS`.
+    again as ``retry`` equal substeps, from the same state, and where one of those fails as
+    ``retry ** 2``, before the trajectory is marked failed (0, the default: never). A model
+    that blows up fails either way; one whose field is merely stiff somewhere goes on.
+    ``metriplex.evaluate`` and ``metriplex rollout`` use :data:`RETRY_SUBSTEPS`.
     """
     retry = expect_integer(retry, what="retry", least=0)
     out = _solve(model, x0, ts, scheme, jnp.asarray(retry, jnp.asarray(0).dtype))
