@@ -1,5 +1,6 @@
-"""The wall around the training data (``--confine``): zero where the data are, coercive outside,
-saved with the model, and what it is for: with M grad E = 0 exact, a rollout of a learned model
+"""The wall around the training data (``--confine``): zero where the data are, quartic (coercive)
+outside, saved with the model (files without a power keep the quadratic wall they were trained
+with), and what it is for: with M grad E = 0 exact, a rollout of a learned model
 stays bounded whatever the networks learned."""
 
 import jax
@@ -19,21 +20,26 @@ def _data(rng: np.random.Generator) -> np.ndarray:
     return x
 
 
-def test_the_wall_is_zero_on_the_data_and_quadratic_outside():
+def test_the_wall_is_zero_on_the_data_and_quartic_outside():
     x = _data(np.random.default_rng(0))
     wall = Confinement.around(x, margin=0.0)
     assert wall.indices == (0, 1)
     inside = jnp.asarray(x)
     assert float(jnp.max(jax.vmap(wall)(inside))) == 0.0
     assert float(jnp.max(jnp.abs(jax.vmap(jax.grad(wall))(inside)))) == 0.0
-    # One and two standard deviations above the largest x1: 1 and 4 (a spread of 10 per unit).
+    # One and two standard deviations above the largest x1: 1 and 16 (a spread of 10 per unit).
     edge = jnp.array([0.0, float(x[:, 1].max()), 7.0])
     one = edge.at[1].add(x[:, 1].std())
     two = edge.at[1].add(2 * x[:, 1].std())
     assert float(wall(one)) == pytest.approx(1.0, rel=1e-12)
-    assert float(wall(two)) == pytest.approx(4.0, rel=1e-12)
+    assert float(wall(two)) == pytest.approx(16.0, rel=1e-12)
     below = jnp.array([float(x[:, 0].min()) - 3 * x[:, 0].std(), 1e3, 7.0])
-    assert float(wall(below)) == pytest.approx(9.0, rel=1e-12)
+    assert float(wall(below)) == pytest.approx(81.0, rel=1e-12)
+    # Its Hessian is continuous across the box's face (the Newton steps of implicit schemes
+    # use it): zero on the face, as inside.
+    hessian = jax.hessian(wall)
+    assert float(jnp.max(jnp.abs(hessian(edge)))) == 0.0
+    assert float(jnp.max(jnp.abs(hessian(edge.at[1].add(1e-6 * x[:, 1].std()))))) < 1e-9
     # The constant variable is free: moving it costs nothing.
     assert float(wall(edge.at[2].set(1e6))) == 0.0
     # By default the wall begins one standard deviation beyond the data.
@@ -69,6 +75,17 @@ def test_the_wall_travels_with_the_model_file(tmp_path):
     assert float(back.energy(probe)) == float(model.energy(probe))
 
 
+def test_a_wall_recorded_without_its_power_is_the_quadratic_one_it_was_trained_with():
+    x = _data(np.random.default_rng(2))
+    spec = Confinement.around(x).to_json()
+    assert spec.pop("power") == 4
+    old = Confinement.from_json(spec)  # as written before the power was recorded
+    assert old.power == 2
+    probe = jnp.array([0.0, float(x[:, 1].max() + 3 * x[:, 1].std()), 7.0])  # 2 sd beyond
+    assert float(old(probe)) == pytest.approx(4.0, rel=1e-12)
+    assert Confinement.from_json(old.to_json()) == old
+
+
 def test_a_confined_model_with_exact_degeneracy_cannot_run_away():
     # A random model on the standard-normal box, weights tripled so that its field is strong, a
     # learned friction made exactly degenerate: E is conserved, so with the wall the state stays
@@ -101,6 +118,8 @@ def test_a_confined_model_with_exact_degeneracy_cannot_run_away():
     (((0, 1), (0.0,), (1.0, 2.0), (1.0, 1.0)), "one bound and one scale per variable"),
     (((0,), (2.0,), (1.0,), (1.0,)), "low <= high and scales > 0"),
     (((0,), (0.0,), (1.0,), (0.0,)), "low <= high and scales > 0"),
+    (((0,), (0.0,), (1.0,), (1.0,), 1), r"power must be an integer >= 2 .*; got 1\. Leave it"),
+    (((0,), (0.0,), (1.0,), (1.0,), 2.5), "power must be an integer >= 2"),
 ])
 def test_a_malformed_wall_is_refused(args, match):
     with pytest.raises(MetriplexError, match=match):
