@@ -94,7 +94,7 @@ class MLPPotential(AbstractPotential):
     :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
     (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
     ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that is zero
-    on a box a little wider than the training data and quadratic outside it, so that the
+    on a box a little wider than the training data and quartic outside it, so that the
     level sets of the
     potential are bounded: :math:`E = \sigma(\tilde E + W)`.
 
