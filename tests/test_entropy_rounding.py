@@ -22,8 +22,10 @@ def test_the_rounding_of_S_is_counted_in_the_models_precision():
         ENTROPY_ROUNDING_UNITS * float(np.finfo(np.float32).eps) * 4.0)
     assert one_unit < entropy_step_rounding(s, np.float32) < 1e-5
     assert entropy_step_rounding(s, np.float64) == pytest.approx(4e-12)
-    # A small S keeps the former absolute floor, a NaN (failed rollout) does not poison it.
+    # A small S keeps the former absolute floor; a state that is not finite is left out.
     assert entropy_step_rounding(np.array([1e-3, np.nan]), np.float64) == pytest.approx(1e-12)
+    assert entropy_step_rounding(np.array([4.0, np.inf]), np.float32) == pytest.approx(
+        entropy_step_rounding(s, np.float32))
 
 
 def _report(fall_units: float, dtype):

@@ -313,8 +313,9 @@ def entropy_step_rounding(S: np.ndarray, dtype: Any) -> float:
     (the model's precision, in which the states and ``S`` were computed), and at least
     ``1e-12 max(1, |S|)``. Where the entropy production vanishes (at an equilibrium) a float32
     rollout's entropy steps are rounding of about one unit either way, not a decrease."""
-    top = float(np.max(np.abs(S))) if np.size(S) else 0.0
-    top = top if np.isfinite(top) else 0.0
+    finite = np.abs(np.asarray(S, dtype=np.float64))
+    finite = finite[np.isfinite(finite)]
+    top = float(finite.max()) if finite.size else 0.0
     return max(ENTROPY_ROUNDING_UNITS * float(np.finfo(dtype).eps) * top,
                1e-12 * max(1.0, top))
 

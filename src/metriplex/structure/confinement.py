@@ -11,7 +11,9 @@ a direction in which the entropy grows, and rollouts then leave the data and blo
 zero on a box :math:`[l, h]` a little wider than the training states and quartic outside it
 (:math:`s_i` the variable's standard deviation over the data), makes :math:`E` coercive: a
 softplus network grows at most linearly, so :math:`E + W \to \infty` in every direction. Inside
-the box :math:`W` and its gradient vanish, so it changes neither the fit nor the training.
+the box :math:`W` and its gradient vanish, so it changes no residual of the training pairs;
+only rollouts that leave the box see it (the held-out ones during training included, which
+choose the model kept).
 
 Why quartic: a trained network can fall off the data with a slope :math:`G` (in units of
 :math:`E` per standard deviation) far above its slopes on the data, and a wall of power
@@ -114,4 +116,4 @@ class Confinement(eqx.Module):
         """The wall that :meth:`to_json` wrote (quadratic where it records no power: files
         written before the wall became quartic)."""
         return cls(tuple(spec["indices"]), tuple(spec["low"]), tuple(spec["high"]),
-                   tuple(spec["scale"]), power=int(spec.get("power", 2)))
+                   tuple(spec["scale"]), power=spec.get("power", 2))
