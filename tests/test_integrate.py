@@ -274,8 +274,12 @@ def test_a_step_whose_solve_fails_is_retaken_in_substeps_when_asked():
                             mx.ZeroPoisson(1), mx.KnownFriction(lambda x: x[None, :] ** 4))
     big = solve(grows, jnp.array([[2.0]]), jnp.linspace(0.0, 5.0, 6), scheme=scheme, retry=8)
     assert not big.ok
-    with pytest.raises(mx.MetriplexError, match="retry must be an integer >= 0"):
+    bound = "retry must be an integer from 0 to 1000; got"
+    with pytest.raises(mx.MetriplexError, match=f"{bound} -1"):
         solve(STIFF, x1, TS_STIFF, retry=-1)
+    # retry ** 2 substeps must stay countable in int32: 50 000 would wrap to a negative count.
+    with pytest.raises(mx.MetriplexError, match=f"{bound} 50000"):
+        solve(STIFF, x1, TS_STIFF, retry=50_000)
 
 
 def test_a_step_whose_substeps_fail_is_retaken_once_more_in_the_square_of_them():

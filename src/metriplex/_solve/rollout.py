@@ -28,6 +28,10 @@ RETRY_SUBSTEPS = 8
 #: substeps than the last attempt: ``retry``, then ``retry ** 2``.
 RETRY_LEVELS = 2
 
+#: The largest ``retry``: its ``retry ** RETRY_LEVELS`` substeps (a million) are counted in
+#: int32 where 64-bit types are off.
+MAX_RETRY = 1000
+
 
 class Rollout(NamedTuple):
     """States along a rollout, and where (if anywhere) an implicit step failed.
@@ -229,11 +233,12 @@ def solve(
 
     ``retry``: a step whose solve does not converge (or whose state is not finite) is taken
     again as ``retry`` equal substeps, from the same state, and where one of those fails as
-    ``retry ** 2``, before the trajectory is marked failed (0, the default: never). A model
-    that blows up fails either way; one whose field is merely stiff somewhere goes on.
-    ``metriplex.evaluate`` and ``metriplex rollout`` use :data:`RETRY_SUBSTEPS`.
+    ``retry ** 2``, before the trajectory is marked failed (0, the default: never; at most
+    :data:`MAX_RETRY`). A model that blows up fails either way; one whose field is merely
+    stiff somewhere goes on. ``metriplex.evaluate`` and ``metriplex rollout`` use
+    :data:`RETRY_SUBSTEPS`.
     """
-    retry = expect_integer(retry, what="retry", least=0)
+    retry = expect_integer(retry, what="retry", least=0, below=MAX_RETRY + 1)
     out = _solve(model, x0, ts, scheme, jnp.asarray(retry, jnp.asarray(0).dtype))
     if throw:
         _raise_first_failure(out, scheme)

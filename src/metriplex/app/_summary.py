@@ -66,8 +66,7 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
-def kept_early(history: History, first_stage: bool,
-               reseed: str = "try another --seed") -> str:
+def kept_early(history: History, first_stage: bool, reseed: str) -> str:
     """A clause for train's line where the model kept is an early one that the later models
     lost to: kept within the first tenth of the steps, and the later evaluations' held-out
     rollout scores at a median of more than twice its own. Its error can then look fair (a

@@ -34,7 +34,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import MetriplexError
+from .._errors import MetriplexError, expect_integer
 from ..data import state_statistics
 from .._types import Scalar, State
 
@@ -70,11 +70,9 @@ class Confinement(eqx.Module):
             raise MetriplexError(
                 f"Confinement needs low <= high and scales > 0; got low {low}, high {high}, "
                 f"scale {scale}.")
-        if isinstance(power, bool) or not isinstance(power, int) or power < 2:
-            raise MetriplexError(
-                f"Confinement's power must be an integer >= 2 (its gradient must vanish on the "
-                f"box's faces); got {power!r}. Leave it out for {POWER}.")
-        self.power = power
+        # >= 2: the wall's gradient must vanish on the box's faces
+        self.power = expect_integer(power, what="Confinement's power", least=2,
+                                    fix=f"Leave it out for {POWER}.")
         self.indices = tuple(int(i) for i in indices)
         self.low = tuple(float(v) for v in low)
         self.high = tuple(float(v) for v in high)
