@@ -37,7 +37,7 @@ def test_the_wall_is_zero_on_the_data_and_quartic_outside():
     assert float(wall(below)) == pytest.approx(81.0, rel=1e-12)
     # Its Hessian is continuous across the box's face (the Newton steps of implicit schemes
     # use it): zero on the face, as inside.
-    hessian = jax.hessian(wall)
+    hessian = jax.jit(jax.hessian(wall))
     assert float(jnp.max(jnp.abs(hessian(edge)))) == 0.0
     assert float(jnp.max(jnp.abs(hessian(edge.at[1].add(1e-6 * x[:, 1].std()))))) < 1e-9
     # The constant variable is free: moving it costs nothing.

@@ -116,7 +116,7 @@ def test_training_with_the_command_line_spelling(tmp_path):
     model, history, _, _, _ = train_run(data, config, tmp_path / "run", progress=False)
     assert type(model.friction) is ExchangeFriction
     assert "degeneracy_M" not in history.train  # exact: no penalty to weigh
-    t = jax.vmap(model.terms)(jnp.asarray(data.x[:50], jnp.float32))
+    t = eqx.filter_jit(eqx.filter_vmap(model.terms))(jnp.asarray(data.x[:50], jnp.float32))
     M, gE = t.friction, t.grad_energy
     scale = float(jnp.max(jnp.abs(M))) * float(jnp.max(jnp.abs(gE)))
     assert float(jnp.max(jnp.abs(jnp.einsum("bij,bj->bi", M, gE)))) < 1e-5 * scale

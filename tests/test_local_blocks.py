@@ -61,12 +61,12 @@ def test_the_lattice_refuses_what_does_not_fit():
 def test_the_local_energy_is_a_sum_of_bond_terms():
     E = LocalPotential(Lattice(CELLS, N), width=8, data=_states(50, 0), key=jr.key(1))
     x = _states(1, 2)[0]
-    H = jax.hessian(E)(x)
+    H = jax.jit(jax.hessian(E))(x)  # one compiled program: eager, each operation compiles
     # cells 0 and 2 share no bond: no term couples their variables
     assert float(jnp.max(jnp.abs(H[np.ix_(_cell(0), _cell(2))]))) == 0.0
     assert float(jnp.max(jnp.abs(H[np.ix_(_cell(0), _cell(1))]))) > 0.0
     ring = LocalPotential(Lattice(CELLS, N, periodic=True), width=8, key=jr.key(1))
-    assert float(jnp.max(jnp.abs(jax.hessian(ring)(x)[np.ix_(_cell(0), _cell(3))]))) > 0.0
+    assert float(jnp.max(jnp.abs(jax.jit(jax.hessian(ring))(x)[np.ix_(_cell(0), _cell(3))]))) > 0.0
 
 
 @pytest.mark.parametrize("shared", [False, True], ids=["own", "shared"])
@@ -160,7 +160,7 @@ def test_training_with_the_command_line_spelling(tmp_path):
     model, history, _, _, _ = train_run(data, config, tmp_path / "run", progress=False)
     assert type(model.energy) is LocalPotential and type(model.friction) is LocalFriction
     assert "degeneracy_M" not in history.train  # exact: no penalty to weigh
-    t = jax.vmap(model.terms)(jnp.asarray(data.x[:40], jnp.float32))
+    t = eqx.filter_jit(eqx.filter_vmap(model.terms))(jnp.asarray(data.x[:40], jnp.float32))
     M, gE = t.friction, t.grad_energy
     scale = float(jnp.max(jnp.abs(M))) * float(jnp.max(jnp.abs(gE)))
     assert float(jnp.max(jnp.abs(jnp.einsum("bij,bj->bi", M, gE)))) < 1e-5 * scale

@@ -1,5 +1,6 @@
 """Training pairs held once (states plus row indices), the pooled state scale, and input noise."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -156,11 +157,11 @@ def test_a_loss_on_runs_equals_the_loss_on_the_data_pairs_they_hold():
     loss = mx.CrankNicolsonResidual() + 3.0 * mx.DegeneracyPenalty()
     assert loss.reads_runs
     runs = store.take_runs(jnp.array([2, 0], dtype=rows.first.dtype), 3)
-    total, parts = loss(model, runs)
+    total, parts = eqx.filter_jit(loss)(model, runs)  # one program, not one per operation
     # The same pairs without the crossing one, as independent pairs: the residual is theirs;
     # the penalties, read at the states, also see the state the crossing "pair" starts from.
     pairs = store.take(jnp.array([2, 3, 0, 1, 2]))  # pair k from row k (k < 3), k + 1 after
-    _, expected = loss(model, pairs)
+    _, expected = eqx.filter_jit(loss)(model, pairs)
     np.testing.assert_allclose(parts["residual"], expected["residual"], rtol=1e-12)
     assert np.isfinite(total)
 
