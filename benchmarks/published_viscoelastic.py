@@ -54,6 +54,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from published_pendulum import constant_prediction_error  # noqa: E402
 from zoo import _coerce, _fmt, black_box, standardised_error  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
@@ -132,11 +133,6 @@ def split(count: int, seed: int = 0) -> tuple[list[int], list[int]]:
     order = np.random.default_rng(seed).permutation(count)
     cut = int(0.8 * count)
     return sorted(order[:cut].tolist()), sorted(order[cut:].tolist())
-
-
-def constant_prediction_error(data) -> float:
-    """Mean rel. L2 of predicting x(t) = x(0) on every trajectory."""
-    return float(np.mean([np.linalg.norm(x - x[0]) / np.linalg.norm(x) for _, x in data]))
 
 
 def main(argv=None) -> int:
