@@ -59,7 +59,7 @@ from zoo import _coerce, _fmt, black_box, standardised_error  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
-from metriplex.diagnostics import evaluate  # noqa: E402
+from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
 
 NAMES = ("x", "y", "v", "e", "tau")
@@ -158,8 +158,9 @@ def main(argv=None) -> int:
         model, history, _, _, seconds = train_run(train, config, Path(tmp) / "run",
                                                   overwrite=True, progress=False)
         scheme = scheme_from_name(config.scheme)
-        report = evaluate(model, test, scheme=scheme, horizon=short)
-        standardised, _ = standardised_error(model, test, scheme)
+        rollout = rollout_data(model, test, scheme=scheme)  # one rollout serves every figure
+        report = evaluate(model, test, scheme=scheme, rollout=rollout, horizon=short)
+        standardised, _ = standardised_error(model, test, scheme, rollout)
         box = black_box(train, test, config, horizon=short)
         print(f"  done in {time.perf_counter() - t0:.0f} s", flush=True)
     print(f"\n| model | rel. L2 | to t = {short:.3g} | standardised | failed | steps (kept) "
@@ -174,19 +175,12 @@ def main(argv=None) -> int:
           f"{box['seconds']:.0f} |")
     print(f"| x(t) = x(0) | {_fmt(constant_prediction_error(test))} | | | | | |")
     # (over the states each rollout reached: a failed one is NaN from its failed step on)
-    ys = [x[np.isfinite(x[:, 1]), 1] for _, x in _rollouts(model, test, scheme)]
+    out, _, lengths = rollout
+    ys = [y[:T][np.isfinite(y[:T])] for y, T in zip(np.asarray(out.xs)[..., 1], lengths)]
     drift = max(float(np.ptp(y)) for y in ys)
     print(f"\nLargest change of y along a test rollout: {drift:.3g} (y is constant in the data).")
     print(f"The peer's published network: {PUBLISHED} on the real dataset.")
     return 0
-
-
-def _rollouts(model, data, scheme):
-    from metriplex.diagnostics import rollout_data
-
-    out, xs, lengths = rollout_data(model, data, scheme=scheme)
-    pred = np.asarray(out.xs, np.float64)
-    return [(None, pred[k, :T]) for k, T in enumerate(lengths)]
 
 
 if __name__ == "__main__":
