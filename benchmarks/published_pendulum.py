@@ -60,7 +60,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from zoo import _coerce, _fmt, black_box, standardised_error  # noqa: E402
+from zoo import _fmt, black_box, parse_overrides, standardised_error  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
@@ -156,10 +156,7 @@ def main(argv=None) -> int:
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
                    help="override a training setting (RunConfig field), e.g. scheme=midpoint")
     args = p.parse_args(argv)
-    overrides = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        overrides[key.replace("-", "_")] = _coerce(value)
+    overrides = parse_overrides(args.set)
     kinds = ["flow", "dg"] if args.data == "both" else [args.data]
     given = ["physics", "file"] if args.given == "both" else [args.given]
     print(f"published-pendulum stand-ins {kinds}, flags {given} (physics: {FLAGS}), overrides "

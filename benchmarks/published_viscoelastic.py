@@ -55,7 +55,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from published_pendulum import constant_prediction_error  # noqa: E402
-from zoo import _coerce, _fmt, black_box, standardised_error  # noqa: E402
+from zoo import _fmt, black_box, parse_overrides, standardised_error  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
@@ -141,8 +141,7 @@ def main(argv=None) -> int:
                    help="override a training setting (RunConfig field)")
     p.add_argument("--seed", type=int, default=0, help="the split's and the training's seed")
     args = p.parse_args(argv)
-    overrides = {k.replace("-", "_"): _coerce(v)
-                 for k, _, v in (item.partition("=") for item in args.set)}
+    overrides = parse_overrides(args.set)
     flow = Couette()
     data = flow.data()
     train_ids, test_ids = split(flow.nodes, args.seed)

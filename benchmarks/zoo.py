@@ -77,6 +77,13 @@ def _coerce(value: str):
     return None if value == "none" else value
 
 
+def parse_overrides(items: list[str]) -> dict:
+    """``--set KEY=VALUE ...`` as RunConfig fields (``lr-cuts`` spelled ``lr_cuts`` too) and
+    their values (:func:`_coerce`)."""
+    return {key.replace("-", "_"): _coerce(value)
+            for key, _, value in (item.partition("=") for item in items)}
+
+
 def standardised_error(model, data, scheme, rollout=None) -> tuple[float, list[float]]:
     """Mean over trajectories of ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``; ``rollout``:
     the ``rollout_data`` of ``model`` on ``data`` if already computed."""
@@ -287,10 +294,7 @@ def main(argv=None) -> int:
     p.add_argument("--black-box", action="store_true",
                    help="also train an unconstrained field on the same data, for comparison")
     args = p.parse_args(argv)
-    overrides = {}
-    for item in args.set:
-        key, _, value = item.partition("=")
-        overrides[key.replace("-", "_")] = _coerce(value)
+    overrides = parse_overrides(args.set)
     names = args.cases.split(",") if args.cases else list(ZOO)
     unknown = [n for n in names if n not in ZOO]
     if unknown:
