@@ -13,6 +13,7 @@ from metriplex import MetriplexError
 from metriplex.app.config import (
     PRESETS,
     RunConfig,
+    confine_margin,
     confine_on,
     exact_blocks,
     hold_energy_on,
@@ -85,17 +86,28 @@ def test_the_presets_keep_what_they_were_tuned_with(name):
 @pytest.mark.parametrize("structure,on", [
     (dict(poisson="canonical:1", entropy="sum:2"), True),  # S given, M grad E = 0 exact
     (dict(entropy="sum:2"), True),
-    (dict(), False),  # S learned: test states beyond the wall lost accuracy (docs/zoo.md)
+    (dict(), True),  # S learned: E conserved too, the wall further out (confine_margin)
+    (dict(degeneracy="soft"), False),
+    (dict(entropy="zero"), False),  # no S: no first stage, M grad E = 0 not exact
     (dict(poisson="canonical:1", entropy="sum:2", degeneracy="soft"), False),  # E not conserved
     (dict(poisson="canonical:1", entropy="sum:2", friction="zero"), False),
     (dict(poisson="zero", entropy="sum:0,1"), False),
     # M given: exact degeneracy applies to learned blocks only, so E need not be conserved
     (dict(entropy="sum:2", friction="file:M.npy", degeneracy="exact"), False),
 ])
-def test_the_wall_is_on_by_default_where_s_is_given_and_e_is_conserved(structure, on):
+def test_the_wall_is_on_by_default_where_e_is_conserved(structure, on):
     config = RunConfig(**structure)
     assert confine_on(config) is on
     assert confine_on(dataclasses.replace(config, confine=not on)) is (not on)
+    # One standard deviation out where S is given, three where it is learned.
+    assert confine_margin(config) == (3.0 if config.entropy == "neural" else 1.0)
+
+
+def test_the_wall_begins_three_standard_deviations_out_where_s_is_learned():
+    data = generate("oscillator-bath", trajectories=4, steps=20, seed=0)
+    for structure, margin in ((dict(), 3.0), (dict(poisson="canonical:1", entropy="sum:2"), 1.0)):
+        model = build_model(RunConfig(**structure), data, key=jr.key(0))
+        assert model.energy.confinement == mx.Confinement.around(data.x, margin)
 
 
 def test_the_first_stage_trains_the_energy_with_the_wall_the_main_model_has():

@@ -293,8 +293,8 @@ def test_resume_compares_what_decided_options_decide():
                                                    w_temperature=1.0), given) == ""
     said = _resume_differences(dataclasses.replace(given, confine=False), given)
     assert said == "it ran with --no-confine, this command gives --confine"
-    learned = RunConfig()  # S learned: the wall decided off
-    assert _resume_differences(dataclasses.replace(learned, confine=False), learned) == ""
+    penalty = RunConfig(degeneracy="soft")  # M grad E = 0 a penalty: the wall decided off
+    assert _resume_differences(dataclasses.replace(penalty, confine=False), penalty) == ""
 
 
 def test_resume_names_the_step_that_gave_a_file_its_times():

@@ -28,6 +28,7 @@ from .config import (
     _known_poisson,
     _spelling,
     entropy_variables,
+    confine_margin,
     confine_on,
     exact_blocks,
     scheme_from_name,
@@ -99,7 +100,8 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     energy = _spelling(config.energy, "--energy").learned(Learn(
         n, net, x, kE, output_scale=units.energy, features=feats["energy"],
         quadratic=bool(config.quadratic),
-        confinement=Confinement.around(x) if confine_on(config) else None,
+        confinement=(Confinement.around(x, confine_margin(config)) if confine_on(config)
+                     else None),
         argument=option(config.energy).argument))
     poisson, entropy, friction = given
     if entropy is None:

@@ -141,9 +141,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    f"all; the best is kept (default: {REPEATS}; 1 without held-out trajectories)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
-                   "by one standard deviation and quartic outside it, so that its level sets "
-                   "are bounded: with M grad E = 0 no rollout can run away (default: on where "
-                   "S is given as a sum, --entropy sum:..., and M grad E = 0 is exact)")
+                   "by one standard deviation (three where S is learned) and quartic outside "
+                   "it, so that its level sets are bounded: with M grad E = 0 no rollout can "
+                   "run away (default: on where a learned M has M grad E = 0 exact beside an "
+                   "S that is not zero)")
     w.add_argument("--width", type=int, help=f"network width (default {d.width})")
     w.add_argument("--depth", type=int, help=f"hidden layers (default {d.depth})")
     w.add_argument("--activation", choices=sorted(ACTIVATIONS),

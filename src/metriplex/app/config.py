@@ -39,6 +39,7 @@ from ._spellings import indices as _indices
 from ._thermal import (  # noqa: F401 (re-exported)
     DEGENERACY_MODES,
     check_thermal_options,
+    confine_margin,
     confine_on,
     entropy_variables,
     exact_blocks,
