@@ -55,7 +55,13 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from published_pendulum import constant_prediction_error  # noqa: E402
-from zoo import _fmt, black_box, parse_overrides, standardised_error  # noqa: E402
+from zoo import (  # noqa: E402
+    _fmt,
+    black_box,
+    constant_drift,
+    parse_overrides,
+    standardised_error,
+)
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
@@ -173,11 +179,9 @@ def main(argv=None) -> int:
           f"{_fmt(box['standardised'])} | {box['failed']}/{len(test_ids)} | {box['steps']} | "
           f"{box['seconds']:.0f} |")
     print(f"| x(t) = x(0) | {_fmt(constant_prediction_error(test))} | | | | | |")
-    # (over the states each rollout reached: a failed one is NaN from its failed step on)
-    out, _, lengths = rollout
-    ys = [y[:T][np.isfinite(y[:T])] for y, T in zip(np.asarray(out.xs)[..., 1], lengths)]
-    drift = max(float(np.ptp(y)) for y in ys)
-    print(f"\nLargest change of y along a test rollout: {drift:.3g} (y is constant in the data).")
+    drift = constant_drift(test, rollout)  # y: constant along every trajectory
+    print(f"\nLargest change of y along a test rollout: {drift:.3g} standard deviations (y is "
+          "constant in the data).")
     print(f"The peer's published network: {PUBLISHED} on the real dataset.")
     return 0
 

@@ -107,7 +107,8 @@ def standardised_error(model, data, scheme, rollout=None) -> tuple[float, list[f
 def constant_drift(data, rollout) -> float | None:
     """The largest change, over the test rollouts (``rollout_data``'s result), of a variable
     that is constant along every test trajectory, in standard deviations of that variable over
-    the test data (``None`` when no variable is constant)."""
+    the test data (``None`` when no variable is constant), over the states each rollout reached
+    (a failed one is NaN from its failed step on)."""
     out, xs, lengths = rollout
     xs = np.asarray(xs, np.float64)
     constant = [i for i in range(xs.shape[2])
@@ -116,11 +117,14 @@ def constant_drift(data, rollout) -> float | None:
         return None
     pred = np.asarray(out.xs, np.float64)
     d = data.x.std(axis=0)
+    scale = np.where(d[constant] > 0, d[constant], 1.0)
     worst = 0.0
     for k, T in enumerate(lengths):
         p = pred[k, :T][:, constant]
-        worst = max(worst, float(np.max(np.abs(p - p[0]) / np.where(d[constant] > 0,
-                                                                     d[constant], 1.0))))
+        change = np.abs(p - p[0]) / scale
+        reached = change[np.isfinite(change)]
+        if reached.size:
+            worst = max(worst, float(reached.max()))
     return worst
 
 
