@@ -2,7 +2,7 @@
 that no zoo case or reference experiment has, trained with the defaults and the structure
 flags alone.
 
-    .venv/bin/python benchmarks/issue_table.py                    # all four, ~30 minutes on 2 cores
+    .venv/bin/python benchmarks/issue_table.py                    # all four, ~25 minutes on 2 cores
     .venv/bin/python benchmarks/issue_table.py --cases rigid-other --out rows.json
 
 The issue's table measured these cases on the code of the time (its figures in the last
