@@ -40,11 +40,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
-from zoo import _fmt, run_case, standardised_error  # noqa: E402
-from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
+from zoo import _fmt, flag_line, run_case, train_and_test  # noqa: E402
+from metriplex.config import RunConfig  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
-from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
-from metriplex.runs import train_run  # noqa: E402
 from metriplex.systems import get_system  # noqa: E402
 from metriplex.systems.zoo._case import ZooCase  # noqa: E402
 
@@ -52,26 +50,27 @@ CANONICAL_BATH = {"poisson": "canonical:1", "entropy": "sum:2"}
 
 
 def _cases() -> dict:
-    """name -> (description, the issue's figure, a ZooCase or the SciPy case's maker)."""
+    """name -> (description, the issue's figure, a ZooCase or the SciPy case's maker, and the
+    time up to which the error is also reported, or None)."""
     return {
         "bath-linear": (
             "damped linear oscillator with a heat bath", "0.114",
             ZooCase(get_system("oscillator-bath").with_params(quartic=0.0, damping=0.3,
                                                               stiffness=2.0),
-                    CANONICAL_BATH, 32, 300, 0.022, held_out=True)),
+                    CANONICAL_BATH, 32, 300, 0.022, held_out=True), None),
         "rigid-other": (
             "rigid body with another inertia, all learned", "0.023",
             ZooCase(get_system("rigid-body").with_params(inertia=(8.0, 15.0, 35.0)), {}, 5,
                     10_000, 2 * np.pi / 100, test_trajectories=10, test_steps=1000,
-                    held_out=True)),
+                    held_out=True), None),
         "independent-simulator": (
             "oscillator with a heat bath from an independent simulator (SciPy)", "0.054",
-            _scipy_oscillator),
+            _scipy_oscillator, None),
         "pendulum-other": (
             "thermoelastic double pendulum, other masses and conductivity", "0.33",
             ZooCase(get_system("pendulum-energetic").with_params(masses=(1.5, 0.8), kappa=0.3),
                     {"poisson": "canonical:4", "entropy": "sum:8,9"}, 100, 400, 0.1,
-                    held_out=True)),
+                    held_out=True), 10.0),
     }
 
 
@@ -97,31 +96,16 @@ def _scipy_trajectories(count: int, seed: int, steps: int = 200, dt: float = 0.0
 
 def _scipy_oscillator(workdir: Path) -> dict:
     train, test = _scipy_trajectories(30, seed=0), _scipy_trajectories(10, seed=1)
-    config = RunConfig(**CANONICAL_BATH)
-    model, history, _, _, seconds = train_run(train, config, workdir / "scipy", overwrite=True,
-                                              progress=False)
-    scheme = scheme_from_name(config.scheme)
-    rollout = rollout_data(model, test, scheme=scheme)
-    report = evaluate(model, test, scheme=scheme, rollout=rollout)
-    header = json.loads((workdir / "scipy" / "config.json").read_text())
-    return {"rel_l2": report["rollout_error_mean"],
-            "rel_l2_standardised": standardised_error(model, test, scheme, rollout)[0],
-            "failed": int(report["rollout_failures"]),
-            "ground_truth_cn_rel_l2": None, "train_seconds": seconds,
-            "trainings": header.get("trainings"),
-            "constant": report["constant_prediction_error_mean"]}
+    run = train_and_test(train, test, RunConfig(**CANONICAL_BATH), workdir / "scipy")
+    return {"flags": flag_line(CANONICAL_BATH), "rel_l2": run["report"]["rollout_error_mean"],
+            "rel_l2_standardised": run["standardised"],
+            "failed": int(run["report"]["rollout_failures"]), "ground_truth_cn_rel_l2": None,
+            "train_seconds": run["seconds"], "trainings": run["header"].get("trainings")}
 
 
-def _to_horizon(case: ZooCase, model_path: Path, horizon: float = 10.0) -> float:
-    """The rel. L2 up to ``horizon`` on the case's test trajectories (the reference
-    pendulum's bar is on t <= 10)."""
-    from metriplex import load
-    from metriplex.systems import generate
-
-    test = generate(case.system, trajectories=case.test_trajectories, steps=case.horizon_steps,
-                    dt=case.dt, seed=1000)
-    report = evaluate(load(model_path), test, scheme=scheme_from_name("cn"), horizon=horizon)
-    return report["rollout_error_to_horizon_mean"]
+def _up_to(row: dict, key: str) -> str:
+    """`` (to t = H: error)`` where the case reports its error up to a time H."""
+    return "" if row.get(key) is None else f" (to t = {row['horizon']:g}: {_fmt(row[key])})"
 
 
 def main(argv=None) -> int:
@@ -139,26 +123,24 @@ def main(argv=None) -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            what, issue, case = cases[name]
+            what, issue, case, horizon = cases[name]
             t0 = time.perf_counter()
             if isinstance(case, ZooCase):
-                row = run_case(case, {}, Path(tmp))
-                if name == "pendulum-other":
-                    row["to_t10"] = _to_horizon(case, Path(tmp) / case.name / "model.mpx")
+                row = run_case(case, {}, Path(tmp), horizon=horizon)
             else:
                 row = case(Path(tmp))
-                row["flags"] = "--poisson canonical:1 --entropy sum:2"
-            row.update(case=name, what=what, issue=issue, wall=time.perf_counter() - t0)
+            row.update(case=name, what=what, issue=issue, horizon=horizon,
+                       wall=time.perf_counter() - t0)
             rows.append(row)
             print(f"  {name}: rel. L2 {_fmt(row['rel_l2'])}, failed {row['failed']}", flush=True)
     print("\n| case | flags | rel. L2 | standardised | failed | true field, CN | trainings | "
           "train s | the issue's figure |\n|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         truth = r.get("ground_truth_cn_rel_l2")
-        extra = f" (to t = 10: {_fmt(r['to_t10'])})" if "to_t10" in r else ""
-        print(f"| {r['case']}: {r['what']} | `{r['flags']}` | {_fmt(r['rel_l2'])}{extra} | "
-              f"{_fmt(r['rel_l2_standardised'])} | {r['failed']}/10 | "
-              f"{'-' if truth is None else _fmt(truth)} | {len(r.get('trainings') or [0])} | "
+        truth = "-" if truth is None else _fmt(truth) + _up_to(r, "ground_truth_cn_to_horizon")
+        print(f"| {r['case']}: {r['what']} | `{r['flags']}` | {_fmt(r['rel_l2'])}"
+              f"{_up_to(r, 'to_horizon')} | {_fmt(r['rel_l2_standardised'])} | "
+              f"{r['failed']}/10 | {truth} | {len(r.get('trainings') or [0])} | "
               f"{r['train_seconds']:.0f} | {r['issue']} |")
     if args.out:
         Path(args.out).write_text(json.dumps(rows, indent=1, default=str))

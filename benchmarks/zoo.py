@@ -158,8 +158,32 @@ def black_box(train, test, config: RunConfig, horizon: float | None = None) -> d
             "steps": history.step[-1] if history.step else 0, "seconds": seconds}
 
 
+def flag_line(flags: dict) -> str:
+    """A case's structure flags as on the command line (``"(none)"`` for none)."""
+    return " ".join(f"--{k.replace('_', '-')} {v}" for k, v in flags.items()) or "(none)"
+
+
+def train_and_test(train, test, config: RunConfig, out: Path,
+                   horizon: float | None = None) -> dict:
+    """Train ``config``'s model on ``train`` into the run folder ``out`` and roll it out once on
+    ``test``: the ``model``, its ``history``, the training ``seconds``, the run's config.json
+    (``header``), the ``rollout`` (``rollout_data``'s), evaluate's ``report`` (with the error
+    up to ``horizon`` where given) and the ``standardised`` error."""
+    model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
+                                              progress=False)
+    scheme = scheme_from_name(config.scheme)
+    rollout = rollout_data(model, test, scheme=scheme)
+    return {"model": model, "history": history, "seconds": seconds,
+            "header": json.loads((out / "config.json").read_text()), "rollout": rollout,
+            "report": evaluate(model, test, scheme=scheme, rollout=rollout, horizon=horizon),
+            "standardised": standardised_error(model, test, scheme, rollout)[0]}
+
+
 def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
-             with_black_box: bool = False, trajectories: int | None = None) -> dict:
+             with_black_box: bool = False, trajectories: int | None = None,
+             horizon: float | None = None) -> dict:
+    """Train and test one zoo case (or a case built like one) with the defaults, ``overrides``
+    and its flags; ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``)."""
     system = case.system
     trajectories = case.trajectories if trajectories is None else trajectories
     t0 = time.perf_counter()
@@ -169,29 +193,24 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
                     dt=case.dt, seed=1000 + seed)
     gen_seconds = time.perf_counter() - t0
     config = dataclasses.replace(RunConfig(), **{**case.flags, **overrides})  # --set may replace a flag
-    out = workdir / case.name
-    model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
-                                              progress=False)
-    header = json.loads((out / "config.json").read_text())
-    scheme = scheme_from_name(config.scheme)
-    rollout = rollout_data(model, test, scheme=scheme)
-    report = evaluate(model, test, scheme=scheme, rollout=rollout)
-    std_mean, _ = standardised_error(model, test, scheme, rollout)
-    drift = constant_drift(test, rollout)
-    truth = evaluate(system.model, test, scheme=scheme_from_name("cn"))
-    flags = " ".join(f"--{k.replace('_', '-')} {v}" for k, v in case.flags.items()) or "(none)"
+    run = train_and_test(train, test, config, workdir / case.name, horizon=horizon)
+    history, header, report = run["history"], run["header"], run["report"]
+    drift = constant_drift(test, run["rollout"])
+    truth = evaluate(system.model, test, scheme=scheme_from_name("cn"), horizon=horizon)
     return {
         "system": case.name,
         "n": system.n,
-        "flags": flags,
+        "flags": flag_line(case.flags),
         "held_out": case.held_out,
         "scheme": config.scheme,
         "rel_l2": report["rollout_error_mean"],
-        "rel_l2_standardised": std_mean,
+        "to_horizon": report.get("rollout_error_to_horizon_mean"),
+        "rel_l2_standardised": run["standardised"],
         "failed": int(report["rollout_failures"]),
         "test_trajectories": case.test_trajectories,
         "train_trajectories": trajectories,
         "ground_truth_cn_rel_l2": truth["rollout_error_mean"],
+        "ground_truth_cn_to_horizon": truth.get("rollout_error_to_horizon_mean"),
         # The share of the motion that L grad E drives, learned and true: near 0 where the true
         # one is not, friction carries the motion and the learned E is not the energy.
         "reversible_share": report["reversible_share"],
@@ -199,7 +218,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "constant_drift": drift,
         # Above 1, train and evaluate warn: the rollouts make entropy the data do not show.
         "entropy_rise": report.get("entropy_rise_over_data_spread"),
-        "train_seconds": seconds,
+        "train_seconds": run["seconds"],
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
         "first_stage": reversible_first_on(config),
