@@ -60,12 +60,11 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from zoo import _fmt, black_box, parse_overrides, standardised_error  # noqa: E402
+from zoo import _fmt, black_box, parse_overrides, train_and_test  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
 from metriplex.integrate import DiscreteGradient  # noqa: E402
-from metriplex.runs import train_run  # noqa: E402
 from metriplex.systems import SYSTEMS, generate  # noqa: E402
 
 FLAGS = {"poisson": "canonical:4", "entropy": "sum:8,9"}  # --given physics
@@ -121,25 +120,22 @@ def run(kind: str, given: list[str], overrides: dict, workdir: Path) -> list[dic
 
 
 def _train_and_test(system, train, test, config, out: Path) -> dict:
-    model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
-                                              progress=False)
-    scheme = scheme_from_name(config.scheme)
-    report = evaluate(model, test, scheme=scheme, horizon=SHORT)
-    standardised, _ = standardised_error(model, test, scheme)
+    run = train_and_test(train, test, config, out, horizon=SHORT)
+    report, history = run["report"], run["history"]
     truth = {name: evaluate(system.model, test, scheme=scheme_from_name(name))
              for name in ("cn", "midpoint", "discrete-gradient")}
     return {
         "rel_l2": report["rollout_error_mean"],
         "to_short": report["rollout_error_to_horizon_mean"],
         "rel_l2_completed": report["rollout_error_mean_completed"],
-        "standardised": standardised,
+        "standardised": run["standardised"],
         "failed": int(report["rollout_failures"]),
         "truth": {k: v["rollout_error_mean"] for k, v in truth.items()},
         "constant": constant_prediction_error(test),
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
         "stopped": history.stopped,
-        "seconds": seconds,
+        "seconds": run["seconds"],
     }
 
 

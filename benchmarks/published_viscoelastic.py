@@ -60,13 +60,11 @@ from zoo import (  # noqa: E402
     black_box,
     constant_drift,
     parse_overrides,
-    standardised_error,
+    train_and_test,
 )
 
-from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
+from metriplex.config import RunConfig  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
-from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
-from metriplex.runs import train_run  # noqa: E402
 
 NAMES = ("x", "y", "v", "e", "tau")
 PUBLISHED = 0.0079  # the peer's network on the real dataset (rel. L2 on its test trajectories)
@@ -160,12 +158,9 @@ def main(argv=None) -> int:
           f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        model, history, _, _, seconds = train_run(train, config, Path(tmp) / "run",
-                                                  overwrite=True, progress=False)
-        scheme = scheme_from_name(config.scheme)
-        rollout = rollout_data(model, test, scheme=scheme)  # one rollout serves every figure
-        report = evaluate(model, test, scheme=scheme, rollout=rollout, horizon=short)
-        standardised, _ = standardised_error(model, test, scheme, rollout)
+        run = train_and_test(train, test, config, Path(tmp) / "run", horizon=short)
+        history, report, rollout = run["history"], run["report"], run["rollout"]
+        standardised, seconds = run["standardised"], run["seconds"]
         box = black_box(train, test, config, horizon=short)
         print(f"  done in {time.perf_counter() - t0:.0f} s", flush=True)
     print(f"\n| model | rel. L2 | to t = {short:.3g} | standardised | failed | steps (kept) "
