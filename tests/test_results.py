@@ -334,3 +334,54 @@ def test_a_model_that_makes_more_entropy_than_the_data_show_is_warned_about():
     assert r["null_reasons"]["entropy_rise_over_data_spread"] == (
         "the learned entropy is constant over the data's states")
     assert not [w for w in structure_warnings(r) if "makes entropy" in w]
+
+
+def _dtype_dependent_friction_model(float32_m: float, float64_m: float):
+    """A float32 model (its energy's weights are float32) whose friction is ``m I`` with m
+    depending on the dtype it is evaluated in: what float32 rounding does to the rates of a
+    stiff friction, made explicit."""
+    import jax.numpy as jnp
+    import jax.random as jr
+
+    import metriplex as mx
+    from metriplex._model import with_dtype
+
+    def friction(x):
+        m = float32_m if x.dtype == jnp.float32 else float64_m
+        return m * jnp.eye(2, dtype=x.dtype)
+
+    energy = mx.MLPPotential(2, width=4, depth=1, key=jr.key(0))
+    model = mx.GenericModel(energy, mx.SumOf((0, 1)), mx.ZeroPoisson(2),
+                            mx.KnownFriction(friction))
+    return with_dtype(model, jnp.float32)
+
+
+def test_a_decrease_of_the_entropy_that_float32_alone_makes_is_not_counted():
+    # A float32 model's dS/dt at a state is a sum of rates that cancel where a stiff friction
+    # conducts heat between cells at nearly equal temperatures, so its float32 rounding can be
+    # negative; the reference pendulum's exactly GENERIC model (L grad S = 0, M = B B^T)
+    # "decreased" its entropy at 1.8 % of its rollout states that way. A state counts only
+    # where the same model in float64 decreases its entropy too.
+    from metriplex.diagnostics import entropy_production_negative_fraction
+
+    states = np.linspace([0.5, 1.0], [1.5, 2.0], 16)
+    scale = np.ones(2)
+    rounding = _dtype_dependent_friction_model(-1.0, 0.0)  # negative in float32 only
+    assert entropy_production_negative_fraction(rounding, states, scale) == 0.0
+    real = _dtype_dependent_friction_model(-1.0, -1.0)  # negative in both
+    assert entropy_production_negative_fraction(real, states, scale) == 1.0
+
+
+def test_the_decreasing_entropy_warning_names_the_friction_where_l_grad_s_is_zero():
+    from metriplex.app._warnings import structure_warnings
+
+    def line(residual):
+        (w,) = [w for w in structure_warnings({"entropy_production_negative_fraction": 0.2,
+                                               "degeneracy_L_gradS_relative": residual})
+                if "entropy decreases" in w]
+        return w
+
+    assert "L grad S is not zero (relative residual 0.3)" in line(0.3)
+    held = line(0.0)
+    assert "L grad S is not zero" not in held
+    assert "L grad S is zero (relative residual 0), so the friction M is not positive" in held

@@ -57,6 +57,11 @@ REVERSIBLE_SHARE = _LIMITS.reversible_share
 NEGATIVE_PRODUCTION = _LIMITS.entropy_production
 
 
+#: At or below this relative |L grad S|, L grad S = 0 holds (by construction, to rounding), and
+#: a decreasing entropy is the friction's.
+EXACT_RESIDUAL = 1e-6
+
+
 #: Above this share of the motion driven by L grad E, the learned friction is called idle (the
 #: model is reversible) in the warning on a decreasing entropy.
 IDLE_FRICTION_SHARE = 0.999
@@ -108,9 +113,11 @@ def structure_warnings(metrics: dict) -> list[str]:
     if negative is not None and negative > NEGATIVE_PRODUCTION:
         residual = metrics.get("degeneracy_L_gradS_relative")
         held = "" if residual is None else f" (relative residual {residual:.2g})"
+        cause = (f"L grad S is not zero{held}" if residual is None or residual > EXACT_RESIDUAL
+                 else f"L grad S is zero{held}, so the friction M is not positive "
+                 "semi-definite there (friction_min_eigenvalue in the metrics)")
         out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
-                   f"states: L grad S is not zero{held}, so this S is not an entropy of the "
-                   "model's flow. Where L and S are learned, L grad S = 0 is a penalty by "
+                   f"states: {cause}, so this S is not an entropy of the model's flow. Where L and S are learned, L grad S = 0 is a penalty by "
                    "default and --degeneracy exact makes it exact (it can cost accuracy, see "
                    "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
                    "default S is then learned of the variables L leaves free, where L has "
