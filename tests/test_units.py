@@ -79,3 +79,37 @@ def test_training_is_the_same_in_other_units(fit_in_the_first_units, time_factor
     assert a.valid["total"][-1] < a.valid["total"][0] / 20
     np.testing.assert_allclose(a.valid["total"], b.valid["total"], rtol=1e-5)
     np.testing.assert_allclose(f0, f1, rtol=1e-4, atol=1e-6 * np.abs(f0).max())
+
+
+def test_times_far_from_zero_roll_a_float32_model_out_as_times_from_zero():
+    # A clock's times (t = 1e6 s, or 1.7e9 for Unix time) cast to float32 lose the steps (at
+    # 1e6 to multiples of 1/16): rollouts are taken on the steps, shifted in float64 first.
+    import jax.numpy as jnp
+
+    from metriplex._model import with_dtype
+    from metriplex.diagnostics import evaluate
+
+    data = _data()
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural")
+    model = with_dtype(build_model(config, data, key=jr.key(0), units=units_for(config, data)),
+                       jnp.float32)
+    t, x = next(iter(data))
+    x0 = jnp.asarray(x[0], jnp.float32)
+    near = mx.solve(model, x0, t)
+    for offset in (1e6, 1.7e9):
+        far = mx.solve(model, x0, t + offset)
+        np.testing.assert_array_equal(np.asarray(far.xs), np.asarray(near.xs))
+        np.testing.assert_array_equal(np.asarray(far.ts), np.asarray(jnp.asarray(t + offset,
+                                                                               jnp.float32)))
+    base = evaluate(model, data)
+    shifted = evaluate(model, _transformed_time(data, 1e6))
+    assert shifted["rollout_error_mean"] == pytest.approx(base["rollout_error_mean"], rel=1e-6)
+    assert shifted["step_sensitivity"] == pytest.approx(base["step_sensitivity"], rel=1e-6)
+    check = mx.RolloutCheck(steps=20, trajectories=2)
+    ts_near, _, _ = check.prepare(data, jnp.float32)
+    ts_far, _, _ = check.prepare(_transformed_time(data, 1e6), jnp.float32)
+    np.testing.assert_array_equal(np.asarray(ts_far), np.asarray(ts_near))
+
+
+def _transformed_time(data, offset):
+    return mx.Trajectories(data.trajectory, data.t + offset, data.x, data.names)

@@ -69,7 +69,7 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
     dtype = float_dtype(model)
     x0 = jnp.asarray(xs[pick, 0], dtype)
     if rollout is None:
-        out = solve(model, x0, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
+        out = solve(model, x0, grid, scheme=scheme, retry=RETRY_SUBSTEPS)
         on_grid, failed = np.asarray(out.xs, np.float64), np.asarray(out.failed_step)
     else:
         on_grid = np.asarray(rollout[0].xs, np.float64)[pick, :w]
@@ -99,12 +99,11 @@ def _refined_rollout(model, scheme, x0, fine, w):
     steps, the evaluation's own). Retried as the evaluation's rollouts are, so a model they
     complete is compared here too. Returns the states (float64, NaN from a failure on) and
     the index of the first failed state per trajectory (-1: none)."""
-    dtype = float_dtype(model)
     x, failed, parts = x0, np.full(x0.shape[0], -1), [np.asarray(x0, np.float64)[:, None]]
     for k in range(0, fine.shape[1] - 1, w - 1):
         # a failed trajectory takes zero steps (a constant grid), as in one rollout
         grid = np.where((failed >= 0)[:, None], fine[:, k:k + 1], fine[:, k:k + w])
-        out = solve(model, x, jnp.asarray(grid, dtype), scheme=scheme, retry=RETRY_SUBSTEPS)
+        out = solve(model, x, grid, scheme=scheme, retry=RETRY_SUBSTEPS)
         piece = np.asarray(out.failed_step)
         failed = np.where((failed < 0) & (piece >= 0), k + piece, failed)
         parts.append(np.asarray(out.xs, np.float64)[:, 1:])

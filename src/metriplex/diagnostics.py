@@ -73,9 +73,8 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
     K, T = ts.shape
     size = K if K * T <= ROLLOUT_BATCH_STATES else -(-K // max(1, ROLLOUT_BATCHES))
     if size >= K:
-        out = solve(model, jnp.asarray(xs[:, 0], dtype), jnp.asarray(ts, dtype), scheme=scheme,
-                    retry=retry)
-        return out, xs, lengths
+        out = solve(model, jnp.asarray(xs[:, 0], dtype), ts, scheme=scheme, retry=retry)
+        return out._replace(ts=ts), xs, lengths  # the data's own times, in float64
 
     def batch(a):
         b = min(a + size, K)
@@ -84,9 +83,8 @@ def rollout_data(model: GenericModel, data: Trajectories, *, scheme: AbstractSch
             pad = size - (b - a)
             x0 = np.concatenate([x0, np.repeat(x0[-1:], pad, axis=0)])
             grid = np.concatenate([grid, np.full((pad, T), grid[-1, 0])])
-        out = solve(model, jnp.asarray(x0, dtype), jnp.asarray(grid, dtype), scheme=scheme,
-                    retry=retry)
-        return [np.asarray(v)[: b - a] for v in out]
+        out = solve(model, jnp.asarray(x0, dtype), grid, scheme=scheme, retry=retry)
+        return [np.asarray(v)[: b - a] for v in out._replace(ts=grid)]
 
     starts = range(0, K, size)
     with progress_bar(total=K, disable=not progress, desc="rollouts", unit="trajectory",

@@ -248,22 +248,39 @@ def solve(
 def _solve(model, x0, ts, scheme, retry) -> Rollout:
     scheme = CrankNicolson() if scheme is None else scheme
     x0 = jnp.asarray(x0)
+    grid = _from_start(ts, x0.dtype)
     ts = jnp.asarray(ts, dtype=x0.dtype)
     _check_inputs(x0, ts, model_size(model))
     if x0.ndim == 1:
         if ts.ndim != 1:
             raise MetriplexError(f"a single x0 needs ts of shape (T,); got {ts.shape}.")
-        xs, failed, its = _rollout_one(model, scheme, x0, ts, retry)
+        xs, failed, its = _rollout_one(model, scheme, x0, grid, retry)
         return Rollout(ts, xs, failed, its)
     if ts.ndim == 1:
         ts = jnp.broadcast_to(ts, (x0.shape[0], ts.shape[0]))
+        grid = jnp.broadcast_to(grid, ts.shape)
     if ts.shape[0] != x0.shape[0]:
         raise MetriplexError(
             f"ts has {ts.shape[0]} grids for {x0.shape[0]} initial states; give one shared grid "
             "of shape (T,) or one per state."
         )
-    xs, failed, its = _rollout_batch(model, scheme, x0, ts, retry)
+    xs, failed, its = _rollout_batch(model, scheme, x0, grid, retry)
     return Rollout(ts, xs, failed, its)
+
+
+def _from_start(ts, dtype) -> jax.Array:
+    """``ts`` measured from each grid's first time, in ``dtype``: a rollout needs only the
+    steps, and times far from 0 (a clock's, t = 1.7e9 s) lose them when cast to float32 (at
+    t = 1e6 to multiples of 1/16), so the shift is taken in float64 first where ``ts`` is
+    concrete."""
+    try:
+        a = np.asarray(ts, dtype=np.float64)
+    except jax.errors.TracerArrayConversionError:  # under a transformation: as given
+        a = jnp.asarray(ts, dtype=dtype)
+        return a - a[..., :1] if a.ndim and a.shape[-1] else a
+    if a.ndim and a.shape[-1] and np.all(np.isfinite(a[..., :1])):
+        a = a - a[..., :1]
+    return jnp.asarray(a, dtype=dtype)
 
 
 @in_full_precision
