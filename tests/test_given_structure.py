@@ -69,6 +69,25 @@ def test_cli_config_rejects_a_wrong_operator_file(tmp_path):
         validate(RunConfig(poisson=f"file:{tmp_path / 'L.txt'}"), 2)
 
 
+def test_operator_mat_files_are_read_as_the_data_reader_reads_them(tmp_path):
+    # A sparse L (as scipy.io.savemat stores a scipy.sparse matrix, and MATLAB a sparse one)
+    # and an L inside the file's only struct are read; a complex L is refused by name.
+    import scipy.sparse
+
+    from metriplex.io._operators import read_matrix
+
+    scipy.io.savemat(tmp_path / "sparse.mat", {"L": scipy.sparse.csc_matrix(CANONICAL)})
+    np.testing.assert_array_equal(read_matrix(str(tmp_path / "sparse.mat"), "L", 3), CANONICAL)
+    scipy.io.savemat(tmp_path / "struct.mat",
+                     {"data": {"Z": np.zeros((2, 3, 4)), "L": CANONICAL}})
+    np.testing.assert_array_equal(read_matrix(str(tmp_path / "struct.mat"), "L", 3), CANONICAL)
+    with pytest.raises(mx.MetriplexError, match=r"struct `data` .* has no variable 'M'"):
+        read_matrix(str(tmp_path / "struct.mat"), "M", 3)
+    scipy.io.savemat(tmp_path / "complex.mat", {"L": CANONICAL * (1 + 1j)})
+    with pytest.raises(mx.MetriplexError, match="holds complex numbers; --poisson needs a real"):
+        read_matrix(str(tmp_path / "complex.mat"), "L", 3)
+
+
 def test_zoo_cases_are_registered_and_distinct_from_the_reference_systems():
     from metriplex.systems import SYSTEMS
     from metriplex.systems.zoo import ZOO
@@ -135,3 +154,20 @@ def test_an_unknown_activation_is_refused_by_name():
     with pytest.raises(mx.MetriplexError, match=r"--activation must be one of gelu, silu, "
                        r"softplus, tanh .*; got 'relu'\. Example: --activation softplus\."):
         validate(RunConfig(activation="relu"), 3)
+
+
+def test_a_given_l_that_moves_the_given_entropy_is_refused_before_any_work(tmp_path):
+    # S = q with L canonical on (q, p): L grad S != 0 by construction, so the model could
+    # never be GENERIC; the same for a constant L from a file. A variable named twice in S
+    # would double it.
+    with pytest.raises(mx.MetriplexError, match=r"canonical:1 with --entropy sum:0: the given L "
+                       r"moves the given entropy .* variables ones that L leaves still \(here "
+                       r"\[2\]\)"):
+        validate(RunConfig(poisson="canonical:1", entropy="sum:0"), 3)
+    np.save(tmp_path / "L.npy", CANONICAL)
+    with pytest.raises(mx.MetriplexError, match="the given L moves the given entropy"):
+        validate(RunConfig(poisson=f"file:{tmp_path / 'L.npy'}", entropy="sum:1,2"), 3)
+    validate(RunConfig(poisson=f"file:{tmp_path / 'L.npy'}", entropy="sum:2"), 3)
+    validate(RunConfig(poisson="canonical:1", entropy="sum:2"), 3)
+    with pytest.raises(mx.MetriplexError, match=r"indices must be distinct; got \[2, 2\]"):
+        validate(RunConfig(poisson="canonical:1", entropy="sum:2,2"), 3)

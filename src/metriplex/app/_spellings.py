@@ -76,6 +76,12 @@ def indices(text: str, n: int, option: str) -> tuple[int, ...]:
             f"{option} indices must lie in [0, {n - 1}] for data with {n} variables; got "
             f"{list(idx)}. Count state columns from 0 (after `trajectory` and `t`)."
         )
+    twice = sorted({i for i in idx if idx.count(i) > 1})
+    if twice:
+        raise MetriplexError(
+            f"{option} indices must be distinct; got {list(idx)}, which repeats {twice}. "
+            f"Name each variable once (e.g. {','.join(str(i) for i in dict.fromkeys(idx))})."
+        )
     return idx
 
 

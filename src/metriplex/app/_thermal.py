@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from typing import Protocol
 
+import numpy as np
+
 from .._errors import MetriplexError
 from ..structure.confinement import MARGIN
 from ._option import entropy_variables as _sum_indices, option
@@ -135,3 +137,31 @@ def confine_margin(config: ThermalFields) -> float:
     every zoo case and reference experiment that gives it), :data:`LEARNED_ENTROPY_MARGIN` (3)
     where S is learned."""
     return LEARNED_ENTROPY_MARGIN if option(config.entropy).kind == "neural" else MARGIN
+
+
+def check_entropy_left_still(poisson, entropy, flags: str) -> None:
+    """Refuse a given constant L that moves a given S = sum of variables: L grad S = 0 is one
+    of GENERIC's degeneracy conditions, and no training can meet it then. ``poisson`` and
+    ``entropy`` are the given blocks (None where learned); ``flags`` names the options."""
+    from ..structure import CanonicalPoisson, ConstantPoisson, SumOf
+
+    if not isinstance(entropy, SumOf):
+        return
+    if isinstance(poisson, CanonicalPoisson):
+        L = np.asarray(poisson.matrix())
+    elif isinstance(poisson, ConstantPoisson):
+        L = np.asarray(poisson.matrix)
+    else:
+        return
+    moved = L[:, list(entropy.indices)].sum(axis=1)  # L grad S, grad S = sum of unit vectors
+    if np.max(np.abs(moved)) <= 1e-12 * max(1.0, float(np.max(np.abs(L)))):
+        return
+    still = [i for i in range(L.shape[0]) if not np.any(L[:, i]) and not np.any(L[i, :])]
+    raise MetriplexError(
+        f"{flags}: the given L moves the given entropy (L grad S = "
+        f"{np.round(moved, 12).tolist()}), so L grad S = 0, a degeneracy condition of GENERIC, "
+        "cannot hold and the entropy would change along the reversible motion. Name as entropy "
+        "variables ones that L leaves still"
+        + (f" (here {still})" if still else "")
+        + ", or learn S (--entropy neural)."
+    )

@@ -38,6 +38,7 @@ from ._spellings import indices as _indices
 
 from ._thermal import (  # noqa: F401 (re-exported)
     DEGENERACY_MODES,
+    check_entropy_left_still,
     check_thermal_options,
     confine_margin,
     confine_on,
@@ -183,6 +184,9 @@ def validate(config: RunConfig, n: int) -> None:
             spelling.given(option(value).argument, n)  # its checks (a file: its matrix)
         elif spelling.check is not None:
             spelling.check(option(value).argument, n)
+    check_entropy_left_still(_given(config.poisson, "--poisson", n),
+                             _given(config.entropy, "--entropy", n),
+                             f"--poisson {config.poisson} with --entropy {config.entropy}")
     if config.constant not in ("auto", "none"):
         _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")

@@ -34,23 +34,21 @@ def read_matrix(path: str, key: str, n: int) -> np.ndarray:
                     )
                 a = z[key] if key in names else z[names[0]]
         elif p.suffix == ".mat":
-            import scipy.io
-
-            scope = scipy.io.loadmat(p)
-            if key not in scope:
-                found = sorted(k for k in scope if not k.startswith("__"))
-                raise MetriplexError(
-                    f"{str(p)!r} has no variable {key!r} (found {found}); store the matrix as "
-                    f"{key}."
-                )
-            a = scope[key]
+            a = _mat_operator(p, key)
         else:
             raise MetriplexError(
                 f"{option} file:PATH reads .npy, .npz or .mat files; got {p.suffix or 'no'} "
                 "suffix. Save the matrix with numpy.save."
             )
+    except MetriplexError:
+        raise
     except (OSError, ValueError, NotImplementedError) as err:
         raise MetriplexError(f"cannot read the matrix {key} from {str(p)!r}: {err}.") from None
+    if np.iscomplexobj(a):
+        raise MetriplexError(
+            f"the matrix {key} in {str(p)!r} holds complex numbers; {option} needs a real "
+            f"{n}x{n} matrix. Store its real part."
+        )
     a = np.asarray(a, dtype=np.float64)
     if a.shape != (n, n):
         raise MetriplexError(
@@ -58,3 +56,23 @@ def read_matrix(path: str, key: str, n: int) -> np.ndarray:
             f"so it must be {n}x{n}."
         )
     return a
+
+
+def _mat_operator(path, key: str) -> np.ndarray:
+    """The variable ``key`` of a MAT file, read as the data reader reads one (v4 to v7.3,
+    sparse matrices dense, the fields of the file's only struct where the top level lacks it),
+    as a real float64 array."""
+    from ._checks import _real
+    from ._mat import _mat_scope
+    from ._mat_load import _load_mat
+
+    scope, where = _mat_scope(_load_mat(path), path, key)
+    if key not in scope:
+        found = sorted(scope)
+        raise MetriplexError(
+            f"{where} has no variable {key!r} (found {found}); store the matrix as {key}."
+        )
+    a = scope[key]
+    if np.iscomplexobj(a):
+        return a  # read_matrix refuses it, naming the option
+    return _real(a, f"the matrix {key}", where)
