@@ -358,3 +358,16 @@ def test_too_little_data_to_compare_residuals_gives_cannot_tell():
         held["note"] and "a share of 0.2 of them" in held["note"] and \
         "too little data" in held["note"]
     assert "held_out_pairs = 2" in v["statement"]
+
+
+def test_a_failed_minimum_is_said_with_the_right_comparison():
+    # held_out_pairs and reversible_share are minimums: failing one means below its limit.
+    from metriplex.verdict import _said
+
+    few = {"name": "held_out_pairs", "value": 2, "threshold": 10, "passed": False, "note": "n"}
+    assert _said(few) == "held_out_pairs = 2 < 10 (n)"
+    many = dict(few, value=40, passed=True)
+    assert _said(many) == "held_out_pairs = 40 >= 10 (n)"
+    big = {"name": "residual_ratio", "value": 3.0, "threshold": 2.0, "passed": False, "note": "r"}
+    assert _said(big) == "residual_ratio = 3 > 2 (r)"
+    assert _said(dict(big, value=1.5, passed=True)) == "residual_ratio = 1.5 <= 2 (r)"

@@ -185,6 +185,17 @@ MISSING_VARIABLE = ("A system that loses energy to, or gains it from, something 
 
 
 @in_full_precision
+def _said(r: dict[str, Any]) -> str:
+    """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
+    on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum)."""
+    above = isinstance(r["value"], (int, float)) and isinstance(r["threshold"], (int, float)) \
+        and r["value"] > r["threshold"]
+    cmp = (">" if above else "<") if r["passed"] is False else (">=" if above else "<=")
+    lim = "" if r["threshold"] is None or isinstance(r["threshold"], bool) else \
+        f" {cmp} {_fmt(r['threshold'])}"
+    return f"{r['name']} = {_fmt(r['value'])}{lim} ({r['note']})"
+
+
 def verdict(
     model: GenericModel,
     data: Trajectories,
@@ -296,24 +307,18 @@ def verdict(
                            key=lambda n: excess[n], reverse=True)[:3]
             laws.append(f"the structure cannot fit the variables {', '.join(worst)}")
 
-    def said(r):
-        cmp = ">" if r["passed"] is False else "<="
-        lim = "" if r["threshold"] is None or isinstance(r["threshold"], bool) else \
-            f" {cmp} {_fmt(r['threshold'])}"
-        return f"{r['name']} = {_fmt(r['value'])}{lim} ({r['note']})"
-
     if outcome == CONSISTENT:
         key = [r for r in reasons if r["name"] == "residual_ratio"][0]
-        statement = (f"consistent with GENERIC: {said(key)}; the fitted model is GENERIC and "
+        statement = (f"consistent with GENERIC: {_said(key)}; the fitted model is GENERIC and "
                      f"its rollouts complete (all {sum(r['passed'] is True for r in reasons)} "
                      "applicable checks pass; see verdict.reasons).")
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
-                     + "; ".join(said(r) for r in failed) + ("; " + "; ".join(laws) if laws
+                     + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
                                                             else "") + ". " + MISSING_VARIABLE)
     else:
         statement = ("cannot tell whether the data are consistent with GENERIC: "
-                     + "; ".join(said(r) for r in failed) + ".")
+                     + "; ".join(_said(r) for r in failed) + ".")
     return {
         "outcome": outcome,
         "consistent": outcome == CONSISTENT,
