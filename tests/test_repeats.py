@@ -135,3 +135,23 @@ def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(traine
     assert again.best_rollout == history.best_rollout
     assert json.loads((out / "config.json").read_text())["kept_training"] == \
         header["kept_training"]
+
+
+def test_an_interrupted_train_says_whether_there_is_anything_to_resume(tmp_path):
+    # Ctrl-C before the first checkpoint (in the stages before the main training) keeps
+    # nothing: --resume would refuse, and so would a plain train into the non-empty folder.
+    import argparse
+
+    from metriplex.app.cli import _what_is_kept
+    from metriplex.app.runs import check_run_folder
+
+    args = argparse.Namespace(command="train", out=str(tmp_path))
+    (tmp_path / "config.json").write_text("{}")
+    said = _what_is_kept(args)
+    assert "nothing to resume" in said and "--overwrite" in said
+    with pytest.raises(mx.MetriplexError, match="Start it again with --overwrite instead of "
+                       "--resume"):
+        check_run_folder(tmp_path, resume=True)
+    (tmp_path / "checkpoint.ckpt").write_bytes(b"")
+    assert "--resume" in _what_is_kept(args)
+    assert _what_is_kept(argparse.Namespace(command="evaluate", out=str(tmp_path))) == ""

@@ -363,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"metriplex {args.command}: error: {e}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print(f"metriplex {args.command}: interrupted", file=sys.stderr)
+        print(f"metriplex {args.command}: interrupted{_what_is_kept(args)}", file=sys.stderr)
         return 130
     except OSError as e:
         where = f" {str(e.filename)!r}" if e.filename else ""
@@ -371,6 +371,22 @@ def main(argv: list[str] | None = None) -> int:
               "the path and its permissions.", file=sys.stderr)
         return EXIT_BAD_INPUT
     return code or 0
+
+
+def _what_is_kept(args: argparse.Namespace) -> str:
+    """What an interrupted ``train`` leaves: a checkpoint to resume from, or nothing (the
+    first stages, before the main training, are not checkpointed)."""
+    if args.command != "train" or not getattr(args, "out", None):
+        return ""
+    from pathlib import Path
+
+    from ._repeats import checkpoint_path
+
+    if checkpoint_path(Path(args.out), 0).is_file():
+        return f"; continue with the same command and --resume ({args.out} holds a checkpoint)"
+    return (f" before its first checkpoint (the stages before the main training keep none), "
+            f"so there is nothing to resume: run the same command again with --overwrite to "
+            f"start over in {args.out}")
 
 
 if __name__ == "__main__":

@@ -51,8 +51,9 @@ def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool =
     if resume:
         if not checkpoint_path(out, 0).is_file():
             raise MetriplexError(
-                f"cannot resume: {str(out)!r} holds no checkpoint.ckpt. Start a new run without "
-                "--resume."
+                f"cannot resume: {str(out)!r} holds no checkpoint.ckpt (a run interrupted "
+                "before its first checkpoint keeps none). Start it again with --overwrite "
+                "instead of --resume."
             )
         return
     if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not overwrite:
