@@ -433,3 +433,28 @@ def test_a_folder_that_os_access_calls_writable_but_is_not():
     with pytest.raises(mx.MetriplexError, match=r"cannot write --out '/proc/m\.json': the "
                                                 r"folder '/proc' is not writable"):
         check_output_file("/proc/m.json")
+
+
+def test_outputs_never_replace_what_the_command_reads(files, tmp_path):
+    # Even with --overwrite (which replaces earlier outputs, not inputs): the data file, a
+    # file of the run folder; and evaluate's figures without --overwrite.
+    data_copy = tmp_path / "data.npz"
+    data_copy.write_bytes((files / "data.npz").read_bytes())
+    before = data_copy.read_bytes()
+    for cmd in ("rollout", "evaluate"):
+        refused(run(cmd, files / "run", data_copy, "--out", data_copy, "--overwrite"),
+                r"--out '.*data\.npz' is the data file this command reads; writing there would "
+                r"replace your data")
+    refused(run("evaluate", files / "run", data_copy, "--out", files / "run" / "config.json",
+                "--overwrite"), r"is a file of the run folder .* which this command reads")
+    refused(run("evaluate", files / "run", data_copy, "--out", tmp_path / "m.csv"),
+            r"unknown extension '\.csv'\. Metrics are written as \.json\.")
+    assert data_copy.read_bytes() == before
+    assert not (files / "run" / "config.json").exists()
+    figures = tmp_path / "figs"
+    figures.mkdir()
+    (figures / "error.png").write_text("mine")
+    refused(run("evaluate", files / "run", data_copy, "--figures", figures, "--no-verdict"),
+            r"--figures '.*figs' already holds error\.png; refusing to overwrite them\. Pass "
+            r"--overwrite")
+    assert (figures / "error.png").read_text() == "mine"

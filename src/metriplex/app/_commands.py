@@ -39,6 +39,44 @@ def _check_trajectory_out(path, overwrite: bool) -> Path:
     return check_output_file(path, overwrite=overwrite, suffixes=trajectory_suffixes())
 
 
+def _check_figures(folder: str | Path, overwrite: bool) -> None:
+    """Refuse, before any work, report figures that would replace files in ``folder``
+    without ``--overwrite``."""
+    from ._report import FIGURE_SUFFIXES, REPORT_FIGURES
+
+    there = [f"{name}{suffix}" for name in REPORT_FIGURES for suffix in FIGURE_SUFFIXES
+             if (Path(folder) / f"{name}{suffix}").exists()]
+    if there and not overwrite:
+        raise MetriplexError(
+            f"--figures {str(folder)!r} already holds {', '.join(there[:4])}"
+            + (f" and {len(there) - 4} more" if len(there) > 4 else "")
+            + "; refusing to overwrite them. Pass --overwrite or choose another --figures "
+            "folder."
+        )
+
+
+#: The files of a run folder that rollout and evaluate read, and never write.
+RUN_FILES = ("model.mpx", "config.json", "history.json", "metrics.json")
+
+
+def _not_an_input(out: str | Path, args: argparse.Namespace, option: str = "--out") -> None:
+    """Refuse an output that would replace what the command reads: the data file, or a file
+    of the run folder (even with --overwrite, which replaces earlier outputs, not inputs)."""
+    out = Path(out).resolve()
+    data = Path(args.data).resolve()
+    run = Path(args.run).resolve()
+    if out == data:
+        raise MetriplexError(
+            f"{option} {str(args.data)!r} is the data file this command reads; writing there "
+            f"would replace your data. Choose another {option}."
+        )
+    if out.parent == run and (out.name in RUN_FILES or out.name.endswith(".ckpt")):
+        raise MetriplexError(
+            f"{option} {str(out)!r} is a file of the run folder {str(args.run)!r}, which this "
+            f"command reads; writing there would damage the run. Choose another {option}."
+        )
+
+
 def _honour_model_dtype(run) -> None:
     """Enable x64 before any array exists when the model file holds float64 weights: every
     command reads a model in the precision it was trained in."""
@@ -168,6 +206,7 @@ def cmd_rollout(args: argparse.Namespace) -> None:
     from .config import scheme_from_name
     from .runs import check_names, run_config
 
+    _not_an_input(args.out, args)
     out = _check_trajectory_out(args.out, args.overwrite)
     status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
                                     suffixes=(".json",))
@@ -282,9 +321,11 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     from .runs import check_names, evaluate_run
 
     if args.out:
-        check_output_file(args.out, overwrite=args.overwrite)
+        _not_an_input(args.out, args)
+        check_output_file(args.out, overwrite=args.overwrite, suffixes=(".json",))
     if args.figures:
         check_output_folder(args.figures, "--figures")
+        _check_figures(args.figures, args.overwrite)
     _positive_finite(args.horizon, "--horizon")
     if args.verdict_steps < 1:
         raise MetriplexError(

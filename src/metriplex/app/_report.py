@@ -42,6 +42,11 @@ class Truth:
     data_label: str = "true"
 
 
+#: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ.
+REPORT_FIGURES = ("trajectories", "error", "residual", "energy_entropy")
+FIGURE_SUFFIXES = (".png", ".pdf", ".npz")
+
+
 def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
                    scheme: str | AbstractScheme = "cn", k: int = 0, solver: str | None = None,
                    rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,

@@ -140,7 +140,8 @@ def check_output_file(path: str | os.PathLike, *, overwrite: bool = False, optio
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise MetriplexError(
             f"cannot write {str(path)!r}: unknown extension {path.suffix.lower() or '(none)'!r}. "
-            f"Trajectories are written as {', '.join(suffixes)}."
+            + ("Trajectories are written as " if suffixes != (".json",) else "Metrics are "
+               "written as ") + f"{', '.join(suffixes)}."
         )
     _check_writable_folder(path.parent, path, option)
     return path
