@@ -58,6 +58,7 @@ from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.losses import SchemeResidual  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
 from metriplex.runs import train_run  # noqa: E402
+from metriplex._standardised import standardised_errors  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems.zoo import ZOO  # noqa: E402
 from metriplex.train import fit  # noqa: E402
@@ -88,19 +89,7 @@ def standardised_error(model, data, scheme, rollout=None) -> tuple[float, list[f
     """Mean over trajectories of ``|D^-1 (pred - obs)| / |D^-1 (obs - mean)|``; ``rollout``:
     the ``rollout_data`` of ``model`` on ``data`` if already computed."""
     out, xs, lengths = rollout_data(model, data, scheme=scheme) if rollout is None else rollout
-    pred = np.asarray(out.xs, np.float64)
-    mean = data.x.mean(axis=0)
-    d = data.x.std(axis=0)
-    d = np.where(d > 0, d, 1.0)
-    errs = []
-    for k, T in enumerate(lengths):
-        p, o = pred[k, :T], xs[k, :T]
-        if not np.all(np.isfinite(p)):
-            errs.append(float("inf"))
-            continue
-        num = np.linalg.norm((p - o) / d)
-        den = np.linalg.norm((o - mean) / d)
-        errs.append(float(num / max(den, 1e-300)))
+    errs = standardised_errors(np.asarray(out.xs, np.float64), xs, lengths, data.x)
     return float(np.mean(errs)), errs
 
 

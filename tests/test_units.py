@@ -113,3 +113,27 @@ def test_times_far_from_zero_roll_a_float32_model_out_as_times_from_zero():
 
 def _transformed_time(data, offset):
     return mx.Trajectories(data.trajectory, data.t + offset, data.x, data.names)
+
+
+def test_the_standardised_rollout_error_does_not_change_with_an_offset():
+    # |pred - obs| / |obs| shrinks when a variable is offset (here q by 1e4): the report gives
+    # the error in standard deviations about the data's mean beside it, which does not.
+    from metriplex._standardised import standardised_errors
+    from metriplex.diagnostics import evaluate
+
+    data = _data()
+    ts, obs, lengths = data.padded()
+    pred = obs + 0.01 * np.sin(np.arange(obs.shape[1]))[None, :, None]
+    offset = np.asarray([1e4, 0.0, 0.0])
+    near = standardised_errors(pred, obs, lengths, data.x)
+    far = standardised_errors(pred + offset, obs + offset, lengths, data.x + offset)
+    np.testing.assert_allclose(far, near, rtol=1e-9)
+    plain = [np.linalg.norm(pred[k, :T] - obs[k, :T]) / np.linalg.norm(obs[k, :T])
+             for k, T in enumerate(lengths)]
+    plain_far = [np.linalg.norm(pred[k, :T] - obs[k, :T]) / np.linalg.norm(obs[k, :T] + offset)
+                 for k, T in enumerate(lengths)]
+    assert max(plain_far) < 1e-3 * min(plain)
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural", width=8)
+    model = build_model(config, data, key=jr.key(0), units=units_for(config, data))
+    report = evaluate(model, data, step_check=False)
+    assert report["rollout_error_standardised_mean"] > 0

@@ -33,6 +33,7 @@ import numpy as np
 from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype, with_dtype
 from ._entropy_rise import entropy_rise
+from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
 from .data import Trajectories, state_scale
@@ -195,6 +196,7 @@ def evaluate(
         per_var_num += np.sum((p - o) ** 2, axis=0)
         per_var_den += np.sum(o**2, axis=0)
     completed = any(np.isfinite(e) for e in per_traj)
+    standardised = standardised_errors(pred, xs, lengths, data.x)
     n_failed = int(np.sum(failed >= 0))
     E, S = energy_entropy_along(model, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac, along, rounding = [], [], [], [], [], []
@@ -240,6 +242,9 @@ def evaluate(
             for name, a, b in zip(data.names, per_var_num, per_var_den)
         },
         "rollout_failures": n_failed,
+        # In standard deviations about the data's mean: an offset cannot shrink it.
+        "rollout_error_standardised_mean": known(float(np.mean(standardised)),
+                                                 "rollout_error_standardised_mean", failures),
         "rollout_error_mean_completed": known(
             float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None,
             "rollout_error_mean_completed", f"no rollout completed ({failures})"),

@@ -53,7 +53,10 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
         if done is not None:
             rollouts += f"; error of the {k - failed} completed: {done:.3e}"
     else:
-        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories)"
+        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories"
+        std = metrics.get("rollout_error_standardised_mean")
+        rollouts += ")" if std is None else (f"; {std:.3e} in standard deviations about the "
+                                            "data's mean, which no offset shrinks)")
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"

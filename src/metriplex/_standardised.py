@@ -1,0 +1,30 @@
+"""The rollout error in standard deviations: part of :func:`metriplex.evaluate`'s report
+(``rollout_error_standardised``). The relative L2 error ``|pred - obs| / |obs|`` shrinks with
+any offset of a variable (a temperature near 300 K, a position of 1e4), so it is reported
+beside one that does not: every variable measured about its mean over the data, in its
+standard deviation there."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def standardised_errors(pred: np.ndarray, obs: np.ndarray, lengths: np.ndarray,
+                        x: np.ndarray) -> list[float]:
+    r"""Per trajectory, :math:`|D^{-1}(\hat x - x)| / |D^{-1}(x - \bar x)|` over its states,
+    with :math:`\bar x` and :math:`D` = diag(standard deviations) of the data's states ``x``
+    (a constant variable counts in its own units); ``inf`` for a rollout that failed.
+    ``pred`` and ``obs``: padded ``(K, T, n)``; ``lengths``: each trajectory's length."""
+    mean = np.mean(x, axis=0)
+    d = np.std(x, axis=0)
+    d = np.where(d > 0, d, 1.0)
+    out = []
+    for k, T in enumerate(lengths):
+        p, o = pred[k, :T], obs[k, :T]
+        if not np.all(np.isfinite(p)):
+            out.append(float("inf"))
+            continue
+        num = np.linalg.norm((p - o) / d)
+        den = np.linalg.norm((o - mean) / d)
+        out.append(float(num / max(den, 1e-300)))
+    return out
