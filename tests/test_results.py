@@ -385,3 +385,50 @@ def test_the_decreasing_entropy_warning_names_the_friction_where_l_grad_s_is_zer
     held = line(0.0)
     assert "L grad S is not zero" not in held
     assert "L grad S is zero (relative residual 0), so the friction M is not positive" in held
+
+
+def test_the_entropy_rise_is_judged_on_completed_rollouts_only():
+    # A rollout that fails can reach any state before it does (1e18 under an explicit step):
+    # its entropy does not count; it is counted in rollout_failures instead.
+    from metriplex._entropy_rise import entropy_rise
+
+    S_data = np.tile(np.linspace(0.0, 1.0, 5), (2, 1))
+    S = S_data.copy()
+    S[1] = [0.0, 1e3, 1e9, 1e18, np.nan]
+    lengths = np.array([5, 5])
+    reasons = {}
+    assert entropy_rise(S, S_data, lengths, np.array([-1, 4]), reasons) == 0.0
+    assert entropy_rise(S, S_data, lengths, np.array([3, 4]), reasons) is None
+    assert "no rollout completed" in reasons["entropy_rise_over_data_spread"]
+
+
+def test_evaluate_says_on_stderr_how_many_rollouts_failed(monkeypatch, tmp_path):
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    import jax.random as jr
+
+    import metriplex as mx
+    import metriplex.app.runs as runs
+    from metriplex.cli import main
+
+    data = tmp_path / "d.npz"
+    t = np.arange(5) * 0.1
+    mx.write(data, mx.Trajectories.from_list([(t, np.c_[np.cos(t), np.sin(t), t])] * 2,
+                                             ("q", "p", "s")))
+    (tmp_path / "run").mkdir()
+    energy = mx.MLPPotential(3, width=4, depth=1, key=jr.key(0))
+    mx.save(tmp_path / "run" / "model.mpx",
+            mx.GenericModel(energy, mx.SumOf((2,)), mx.CanonicalPoisson(3, 1),
+                            mx.ZeroFriction(3)), n=3, names=("q", "p", "s"))
+    metrics = {"trajectories": 8, "rollout_failures": 3, "rollout_error_mean": None,
+               "rollout_error_mean_completed": 1.43,
+               "constant_prediction_error_mean_completed": 1.415}
+    monkeypatch.setattr(runs, "evaluate_run", lambda *a, **k: dict(metrics))
+    monkeypatch.setattr(runs, "check_names", lambda *a, **k: None)
+    err = io.StringIO()
+    with redirect_stderr(err), redirect_stdout(io.StringIO()):
+        main(["evaluate", str(tmp_path / "run"), str(data), "--no-verdict", "--quiet"])
+    said = err.getvalue()
+    assert "warning: 3 of 8 rollouts FAILED (blew up or did not converge)" in said
+    assert "NO better than predicting x(t) = x(0)" in said

@@ -271,7 +271,7 @@ def evaluate(
         "entropy_step_rounding": known(float(np.max(rounding)) if rounding else None,
                                        "entropy_step_rounding", no_steps),
         # How much more the entropy rises along the rollouts than along the data (mean over
-        # them, up to any failure), in units of its spread over the data's states.
+        # the completed ones), in units of its spread over the data's states.
         "entropy_rise_over_data_spread": entropy_rise(S, S_data, lengths, failed,
                                                       null_reasons),
         # At the states of the rollouts up to any failure; null when none ran two steps.

@@ -232,11 +232,13 @@ def cmd_rollout(args: argparse.Namespace) -> None:
             away = _departure(units, xs[k, :stop], data.names)
             if away is not None:
                 entry["left_training_data"] = away
+                when = ("in its initial state" if away["step"] == 0 else
+                        f"at t={float(ts[k, away['step']]):.6g}")
                 what += (f". Before that, the rollout had left the training data: "
                          f"{away['variable']} was {away['standard_deviations']:.0f} training "
-                         f"standard deviations from its training mean at "
-                         f"t={float(ts[k, away['step']]):.6g}; the model was never fitted "
-                         "there (training trajectories that reach that region would help)")
+                         f"standard deviations from its training mean {when}; the model was "
+                         "never fitted there (training trajectories that reach that region "
+                         "would help)")
             kept = (f"writing the {stop} states computed before it" if stop >= 2 else
                     "nothing written for it (a trajectory needs two states)")
             print(f"warning: trajectory {tid}: {what}; {kept}.", file=sys.stderr)
@@ -346,6 +348,12 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
+    failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
+    if failed:
+        print(f"warning: {failed} of {k} rollouts FAILED (blew up or did not converge), so "
+              "rollout_error_mean is null; the other rollout figures are over the completed "
+              "ones or the states before the failures (metriplex rollout says where and why "
+              "each failed).", file=sys.stderr)
     against, worse = against_constant(metrics)
     if worse:
         print(f"warning: the model's rollouts (relative L2 "
