@@ -137,3 +137,17 @@ def test_the_standardised_rollout_error_does_not_change_with_an_offset():
     model = build_model(config, data, key=jr.key(0), units=units_for(config, data))
     report = evaluate(model, data, step_check=False)
     assert report["rollout_error_standardised_mean"] > 0
+
+
+def test_data_whose_time_is_in_another_unit_than_the_training_data_are_warned_about():
+    from metriplex.app._warnings import time_unit_warning
+
+    data = _data()
+    units = {"time": time_scale(data.pairs())}
+    assert time_unit_warning(units, data) == []
+    assert time_unit_warning(units, _transformed(data, 3.0)) == []
+    (line,) = time_unit_warning(units, _transformed(data, 1e3))
+    assert "time scale 1e+03 times the training data's" in line and "same unit" in line
+    (line,) = time_unit_warning(units, _transformed(data, 1e-3))
+    assert "time scale 0.001 times" in line
+    assert time_unit_warning({}, data) == []  # an older run without units

@@ -15,7 +15,8 @@ from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
 from ._summary import train_summary
-from ._warnings import against_constant, structure_warnings
+from ._outputs import check_figures, not_an_input
+from ._warnings import against_constant, structure_warnings, time_unit_warning
 
 if TYPE_CHECKING:
     import argparse
@@ -37,44 +38,6 @@ def _check_trajectory_out(path, overwrite: bool) -> Path:
     from ..io import check_output_file, trajectory_suffixes
 
     return check_output_file(path, overwrite=overwrite, suffixes=trajectory_suffixes())
-
-
-def _check_figures(folder: str | Path, overwrite: bool) -> None:
-    """Refuse, before any work, report figures that would replace files in ``folder``
-    without ``--overwrite``."""
-    from ._report import FIGURE_SUFFIXES, REPORT_FIGURES
-
-    there = [f"{name}{suffix}" for name in REPORT_FIGURES for suffix in FIGURE_SUFFIXES
-             if (Path(folder) / f"{name}{suffix}").exists()]
-    if there and not overwrite:
-        raise MetriplexError(
-            f"--figures {str(folder)!r} already holds {', '.join(there[:4])}"
-            + (f" and {len(there) - 4} more" if len(there) > 4 else "")
-            + "; refusing to overwrite them. Pass --overwrite or choose another --figures "
-            "folder."
-        )
-
-
-#: The files of a run folder that rollout and evaluate read, and never write.
-RUN_FILES = ("model.mpx", "config.json", "history.json", "metrics.json")
-
-
-def _not_an_input(out: str | Path, args: argparse.Namespace, option: str = "--out") -> None:
-    """Refuse an output that would replace what the command reads: the data file, or a file
-    of the run folder (even with --overwrite, which replaces earlier outputs, not inputs)."""
-    out = Path(out).resolve()
-    data = Path(args.data).resolve()
-    run = Path(args.run).resolve()
-    if out == data:
-        raise MetriplexError(
-            f"{option} {str(args.data)!r} is the data file this command reads; writing there "
-            f"would replace your data. Choose another {option}."
-        )
-    if out.parent == run and (out.name in RUN_FILES or out.name.endswith(".ckpt")):
-        raise MetriplexError(
-            f"{option} {str(out)!r} is a file of the run folder {str(args.run)!r}, which this "
-            f"command reads; writing there would damage the run. Choose another {option}."
-        )
 
 
 def _honour_model_dtype(run) -> None:
@@ -206,7 +169,7 @@ def cmd_rollout(args: argparse.Namespace) -> None:
     from .config import scheme_from_name
     from .runs import check_names, run_config
 
-    _not_an_input(args.out, args)
+    not_an_input(args.out, args)
     out = _check_trajectory_out(args.out, args.overwrite)
     status_path = check_output_file(f"{out}.status.json", overwrite=args.overwrite,
                                     suffixes=(".json",))
@@ -221,6 +184,8 @@ def cmd_rollout(args: argparse.Namespace) -> None:
     xs = np.asarray(result.xs, dtype=np.float64)
     failed = np.asarray(result.failed_step)
     units = run_config(args.run).get("units") or {}
+    for line in time_unit_warning(units, data):
+        print(line, file=sys.stderr)
     ids, t_out, x_out, status = [], [], [], []
     for k, T in enumerate(lengths):
         tid = int(data.ids[k])
@@ -320,14 +285,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     import json
 
     from ..io import check_output_file, check_output_folder, load, write_json
-    from .runs import check_names, evaluate_run
+    from .runs import check_names, evaluate_run, run_config
 
     if args.out:
-        _not_an_input(args.out, args)
+        not_an_input(args.out, args)
         check_output_file(args.out, overwrite=args.overwrite, suffixes=(".json",))
     if args.figures:
         check_output_folder(args.figures, "--figures")
-        _check_figures(args.figures, args.overwrite)
+        check_figures(args.figures, args.overwrite)
     _positive_finite(args.horizon, "--horizon")
     if args.verdict_steps < 1:
         raise MetriplexError(
@@ -348,6 +313,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
+    for line in time_unit_warning(run_config(args.run).get("units") or {}, data):
+        print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
     if failed:
         print(f"warning: {failed} of {k} rollouts FAILED (blew up or did not converge), so "
@@ -361,7 +328,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if not args.no_verdict:
-        from .runs import run_config, training_outcome
+        from .runs import training_outcome
         from ..verdict import verdict
 
         cfg = run_config(args.run).get("config", {})

@@ -131,3 +131,27 @@ def structure_warnings(metrics: dict) -> list[str]:
                    "E as the system's energy, and expect rollouts beyond the data to run away "
                    "(see 'Friction that carries the motion' in the README).")
     return out
+
+
+#: Beyond this factor between the data's time scale and the training data's, rollout and
+#: evaluate warn: the same system in the same unit of time moves at the same pace.
+TIME_SCALE_FACTOR = 10.0
+
+
+def time_unit_warning(units: dict, data) -> list[str]:
+    """A warning where ``data`` move on a time scale (:func:`metriplex.data.time_scale`) more
+    than :data:`TIME_SCALE_FACTOR` times apart from that of the training data (``units``:
+    config.json's ``units``): times in another unit (ms against s) give a model steps it was
+    never trained on, and every figure then says so only as a large error."""
+    from ..data import time_scale
+
+    trained = units.get("time")
+    if not trained or len(data.x) < 2 or len(data.pairs().dt) == 0:
+        return []
+    ratio = time_scale(data.pairs()) / float(trained)
+    if 1.0 / TIME_SCALE_FACTOR <= ratio <= TIME_SCALE_FACTOR:
+        return []
+    return [f"warning: these data move on a time scale {ratio:.3g} times the training data's "
+            f"({time_scale(data.pairs()):.3g} against {float(trained):.3g} time units): is "
+            "their time in the same unit (s, ms, h) as the training data's? The model's "
+            "steps are taken in the training data's unit."]

@@ -318,15 +318,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 _OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
 _IDS = "a comma list with ranges such as 0,3,5-9"
-_DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), replacing "
-       "the file's times or supplying them (e.g. a .mat time vector that does not fit the "
-       "snapshots)")
+_DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), for a file "
+       "without times or a .mat time vector that does not fit the snapshots (a file whose own "
+       "times have another step is refused)")
 
 DATA_FORMAT = f"""\
 data format: the observed states, in the layout of their file's suffix
 {layouts_text()}
 Trajectories may be ragged and unevenly sampled; samples within a trajectory are in time order.
-With --dt STEP the file's times are not read: each trajectory gets t = 0, STEP, 2*STEP, ...
+With --dt STEP each trajectory gets t = 0, STEP, 2*STEP, ... (a file whose own times have
+another step is refused).
 """
 
 
