@@ -418,6 +418,9 @@ def test_resume_without_config_json(files, tmp_path):
     refused(run("train", files / "data.npz", "--out", tmp_path / "r", "--resume"),
             r"cannot resume: '.*config\.json' is missing")
     assert sorted(p.name for p in (tmp_path / "r").iterdir()) == ["checkpoint.ckpt"]
+    refused(run("train", files / "data.npz", "--out", tmp_path / "r", "--resume",
+                "--overwrite"), r"--resume continues .* --overwrite replaces it; got both")
+    assert sorted(p.name for p in (tmp_path / "r").iterdir()) == ["checkpoint.ckpt"]
 
 
 def test_no_command():

@@ -46,6 +46,11 @@ def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool =
     """Whether a training may write the run folder ``out``; checked before any work, and
     again once the folder is locked. Creates nothing."""
     out = Path(out)
+    if resume and overwrite:
+        raise MetriplexError(
+            "--resume continues the interrupted run in --out and --overwrite replaces it; got "
+            "both. Give --resume to continue it, or --overwrite to start over."
+        )
     check_output_folder(out)
     check_not_in_use(out)
     if resume:
