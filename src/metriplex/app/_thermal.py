@@ -5,7 +5,7 @@ the learned E has the wall around the data (``--confine``), and their checks."""
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -13,6 +13,9 @@ from .._errors import MetriplexError
 from ..structure.confinement import MARGIN
 from ._option import entropy_variables as _sum_indices, option
 from ._spellings import FRICTION
+
+if TYPE_CHECKING:
+    from ..structure import AbstractPoisson, AbstractPotential
 
 
 class ThermalFields(Protocol):
@@ -139,7 +142,8 @@ def confine_margin(config: ThermalFields) -> float:
     return LEARNED_ENTROPY_MARGIN if option(config.entropy).kind == "neural" else MARGIN
 
 
-def check_entropy_left_still(poisson, entropy, flags: str) -> None:
+def check_entropy_left_still(poisson: AbstractPoisson | None,
+                             entropy: AbstractPotential | None, flags: str) -> None:
     """Refuse a given constant L that moves a given S = sum of variables: L grad S = 0 is one
     of GENERIC's degeneracy conditions, and no training can meet it then. ``poisson`` and
     ``entropy`` are the given blocks (None where learned); ``flags`` names the options."""

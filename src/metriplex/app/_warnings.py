@@ -1,11 +1,17 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
 that does not beat predicting no motion, learned temperatures that are negative, a learned
 entropy that rises far more than the data's, a learned energy that does not drive the motion,
-and a learned entropy that decreases."""
+a learned entropy that decreases, and data whose time is in another unit than the training
+data's."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from ..verdict import Thresholds
+
+if TYPE_CHECKING:
+    from ..data import Trajectories
 
 # The warnings fire where the verdict's structure checks fail: one limit for both.
 _LIMITS = Thresholds()
@@ -138,7 +144,7 @@ def structure_warnings(metrics: dict) -> list[str]:
 TIME_SCALE_FACTOR = 10.0
 
 
-def time_unit_warning(units: dict, data) -> list[str]:
+def time_unit_warning(units: dict, data: Trajectories) -> list[str]:
     """A warning where ``data`` move on a time scale (:func:`metriplex.data.time_scale`) more
     than :data:`TIME_SCALE_FACTOR` times apart from that of the training data (``units``:
     config.json's ``units``): times in another unit (ms against s) give a model steps it was
