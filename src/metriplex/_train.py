@@ -9,6 +9,8 @@ evaluations, and everything a checkpoint must hold to continue it.
 
 from __future__ import annotations
 
+from numbers import Real
+
 import dataclasses
 import functools
 import math
@@ -304,10 +306,19 @@ def split_validation(data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, Ar
                      ) -> tuple[Trajectories | Pairs | tuple, Trajectories | None]:
     """``(training data, validation trajectories or None)`` as :func:`~metriplex.fit`'s
     ``validation`` asks: a fraction of the trajectories of ``data`` (split by trajectory, with
-    ``seed``), explicit ``Trajectories``, or ``None``/``0`` for none."""
-    if isinstance(data, Trajectories) and isinstance(validation, (int, float)) and validation:
+    ``seed``), explicit ``Trajectories``, or ``None``/``0`` for none. Pairs hold no
+    trajectories, so a fraction holds none of them out."""
+    if validation is None or isinstance(validation, Trajectories):
+        return data, validation
+    if isinstance(validation, bool) or not isinstance(validation, Real):
+        raise MetriplexError(
+            f"validation must be a fraction of the trajectories to hold out (such as 0.2), "
+            f"validation Trajectories, or None; got {type(validation).__name__} "
+            f"{validation!r:.40}."
+        )
+    if isinstance(data, Trajectories) and validation:
         return data.split(float(validation), seed=seed)
-    return data, validation if isinstance(validation, Trajectories) else None
+    return data, None
 
 
 def default_scale(x: np.ndarray, data: Trajectories | Pairs | tuple) -> np.ndarray:

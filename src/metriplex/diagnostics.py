@@ -22,6 +22,7 @@ JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
 from __future__ import annotations
 
 import contextlib
+from numbers import Real
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
@@ -30,9 +31,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._errors import MetriplexError
 from ._precision import in_full_precision
-from ._model import GenericModel, float_dtype, with_dtype
+from ._model import GenericModel, float_dtype
 from ._entropy_rise import entropy_rise
+from ._entropy_production import (  # noqa: F401 (re-exported)
+    entropy_production_negative_fraction as entropy_production_negative_fraction,
+)
 from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
@@ -136,11 +141,6 @@ def _map_states(fn, xs):
     return jax.lax.map(fn, xs, batch_size=4096)
 
 
-@eqx.filter_jit
-def _field_and_entropy_gradient(model, xs):
-    return jax.vmap(model.vector_field)(xs), jax.vmap(jax.grad(model.entropy))(xs)
-
-
 @in_full_precision
 def evaluate(
     model: GenericModel,
@@ -154,7 +154,9 @@ def evaluate(
 ) -> dict[str, Any]:
     """Metrics of ``model`` on ``data`` (see the module docstring); a JSON-able dict.
 
-    ``horizon``: also report the rollout error up to ``t0 + horizon`` (``error_to_horizon``).
+    ``horizon`` (> 0): also report the rollout error up to ``t0 + horizon``
+    (``rollout_error_to_horizon``, ``rollout_error_to_horizon_mean``; null where a trajectory
+    has no step within it).
     ``rollout``: what :func:`rollout_data` returned for this model, data and scheme, to reuse
     (otherwise the trajectories are rolled out here, with a progress bar when ``progress``).
     ``step_check``: also report ``step_sensitivity`` (:func:`step_sensitivity`; one more
@@ -166,6 +168,7 @@ def evaluate(
     ```
     """
     scheme = CrankNicolson() if scheme is None else scheme
+    _check_inputs(model, data, scheme, horizon)
     if rollout is None:
         rollout = rollout_data(model, data, scheme=scheme, progress=progress)
     # What follows the rollouts takes seconds on large data (compiles, every predicted state
@@ -187,8 +190,12 @@ def evaluate(
             # Only the states up to the horizon count: a rollout that stops later has a
             # finite error up to the horizon (its failure is in `rollout_failures`).
             m = ts[k, :T] <= ts[k, 0] + horizon + 1e-12
-            per_traj_h.append(_relative_error(p[m], o[m]))
-            const_h.append(_relative_error(np.broadcast_to(o[:1], o[m].shape), o[m]))
+            if np.count_nonzero(m) < 2:  # no step inside: nothing to judge, not a 0 error
+                per_traj_h.append(float("nan"))
+                const_h.append(float("nan"))
+            else:
+                per_traj_h.append(_relative_error(p[m], o[m]))
+                const_h.append(_relative_error(np.broadcast_to(o[:1], o[m].shape), o[m]))
         if not np.all(np.isfinite(p)):
             per_traj.append(float("inf"))
             continue
@@ -285,10 +292,15 @@ def evaluate(
     if horizon is not None:
         report["horizon"] = float(horizon)
         report["rollout_error_to_horizon"] = per_traj_h
+        short = bool(np.any(np.isnan(per_traj_h)))
         report["rollout_error_to_horizon_mean"] = known(
-            float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
+            None if short else float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",
+            "a trajectory has no step within the horizon" if short else
             "a rollout failed before the horizon")
-        report["constant_prediction_error_to_horizon_mean"] = float(np.mean(const_h))
+        report["constant_prediction_error_to_horizon_mean"] = known(
+            None if short else float(np.mean(const_h)),
+            "constant_prediction_error_to_horizon_mean",
+            "a trajectory has no step within the horizon")
     bar.update()
     if step_check:
         bar.set_postfix_str("step sensitivity")
@@ -323,53 +335,28 @@ def entropy_step_rounding(S: np.ndarray, dtype: Any) -> float:
                1e-12 * max(1.0, top))
 
 
-#: A state "decreases the entropy" when dS/dt < -PRODUCTION_TOLERANCE * |D grad S| |D^-1 dx/dt|:
-#: more than 1% of the fastest change that the state's speed allows, so rounding at states
-#: where the production vanishes (equilibria, turning points) does not count.
-PRODUCTION_TOLERANCE = 1e-2
+def _check_inputs(model, data, scheme, horizon) -> None:
+    """evaluate's arguments, each of its kind (a clear error, not an AttributeError deep in)."""
+    from ._model import AbstractModel
 
-
-@in_full_precision
-def entropy_production_negative_fraction(model: GenericModel, states: np.ndarray,
-                                         scale: np.ndarray, *, max_states: int = 2048) -> float:
-    r"""The fraction of ``states`` at which the model's own flow decreases its entropy.
-
-    :math:`\dot S = \nabla S\cdot f(x)` with :math:`f = L\nabla E + M\nabla S` is
-    :math:`\nabla S\cdot M\nabla S \ge 0` for a GENERIC model (:math:`L\nabla S = 0`,
-    :math:`M` PSD). A state counts when :math:`\dot S < -` :data:`PRODUCTION_TOLERANCE`
-    :math:`|D\nabla S|\,|D^{-1}f|` (``D`` = diag(``scale``)), a measure that does not
-    depend on the units of time, state or :math:`S`. ``states`` are the model's own rollout
-    (up to any failure), subsampled evenly to ``max_states``; 0.0 for a model whose entropy
-    is constant. The rates are computed in the model's dtype, and a state that a float32
-    model counts is counted only where the model in float64 decreases its entropy too
-    (float32 rounding of rates that cancel, such as heat conducted between two cells, is not
-    a decrease).
-    """
-    x = np.asarray(states, dtype=np.float64)
-    x = x[np.all(np.isfinite(x), axis=1)]
-    if len(x) == 0:
-        return 0.0
-    if len(x) > max_states:
-        x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
-    d = np.asarray(scale, dtype=np.float64)
-    decreases = _entropy_decreases(model, x, d)
-    if np.any(decreases) and float_dtype(model) != np.float64:
-        # A float32 model's dS/dt is a sum of rates that cancel (heat leaving one cell and
-        # entering another), rounded at a float32 ulp of each: a state counts only where the
-        # same model in float64 decreases its entropy too.
-        again = _entropy_decreases(with_dtype(model, jnp.float64), x[decreases], d)
-        decreases[np.flatnonzero(decreases)] = again
-    return float(np.mean(decreases))
-
-
-def _entropy_decreases(model: GenericModel, x: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Where ``model``'s flow decreases its entropy beyond :data:`PRODUCTION_TOLERANCE`, in
-    the model's own dtype (a bool per state of ``x``)."""
-    f, gS = _field_and_entropy_gradient(model, jnp.asarray(x, float_dtype(model)))
-    f, gS = np.asarray(f, dtype=np.float64), np.asarray(gS, dtype=np.float64)
-    rate = np.sum(gS * f, axis=1)
-    size = np.linalg.norm(gS * d[None, :], axis=1) * np.linalg.norm(f / d[None, :], axis=1)
-    return rate < -PRODUCTION_TOLERANCE * size
+    if not isinstance(model, AbstractModel):
+        raise MetriplexError(
+            f"evaluate takes a model (metriplex.load(RUN) gives one); got {type(model).__name__}"
+            f" {model!r:.60}."
+        )
+    if not isinstance(data, Trajectories):
+        raise MetriplexError(
+            f"evaluate takes Trajectories (metriplex.read(PATH) gives them); got "
+            f"{type(data).__name__} {data!r:.60}."
+        )
+    if not isinstance(scheme, AbstractScheme):
+        raise MetriplexError(
+            f"scheme must be a scheme object such as metriplex.CrankNicolson(); got {scheme!r}."
+        )
+    if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, Real)
+                                or not np.isfinite(horizon) or horizon <= 0):
+        raise MetriplexError(f"horizon must be a time > 0 (from each trajectory's start); got "
+                             f"{horizon!r}.")
 
 
 def _relative_error(pred: np.ndarray, obs: np.ndarray) -> float:

@@ -239,6 +239,16 @@ def solve(
     :data:`RETRY_SUBSTEPS`.
     """
     retry = expect_integer(retry, what="retry", least=0, below=MAX_RETRY + 1)
+    if not isinstance(model, AbstractModel):
+        raise MetriplexError(
+            f"solve and simulate take a model (metriplex.load(RUN) gives one); got "
+            f"{type(model).__name__} {model!r:.60}."
+        )
+    if scheme is not None and not isinstance(scheme, AbstractScheme):
+        raise MetriplexError(
+            f"scheme must be a scheme object such as metriplex.CrankNicolson() or "
+            f"metriplex.RK4(); got {scheme!r}."
+        )
     out = _solve(model, x0, ts, scheme, jnp.asarray(retry, jnp.asarray(0).dtype))
     if throw:
         _raise_first_failure(out, scheme)
@@ -248,6 +258,7 @@ def solve(
 def _solve(model, x0, ts, scheme, retry) -> Rollout:
     scheme = CrankNicolson() if scheme is None else scheme
     x0 = jnp.asarray(x0)
+    x0 = x0.astype(_state_dtype(model, x0))
     grid = _from_start(ts, x0.dtype)
     ts = jnp.asarray(ts, dtype=x0.dtype)
     _check_inputs(x0, ts, model_size(model))
@@ -266,6 +277,19 @@ def _solve(model, x0, ts, scheme, retry) -> Rollout:
         )
     xs, failed, its = _rollout_batch(model, scheme, x0, grid, retry)
     return Rollout(ts, xs, failed, its)
+
+
+def _state_dtype(model, x0) -> np.dtype:
+    """The dtype a rollout runs in: ``x0``'s, raised to the model's weights' where those are
+    wider (float32 states of a float64 model), and the weights' (else JAX's default float)
+    for integer states."""
+    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    own = leaves[0].dtype if leaves else None
+    if not jnp.issubdtype(x0.dtype, jnp.floating):
+        return own if own is not None else jnp.zeros(()).dtype
+    if own is not None and jnp.finfo(own).bits > jnp.finfo(x0.dtype).bits:
+        return own
+    return x0.dtype
 
 
 def _from_start(ts, dtype) -> jax.Array:

@@ -123,7 +123,8 @@ def structure_warnings(metrics: dict) -> list[str]:
                  else f"L grad S is zero{held}, so the friction M is not positive "
                  "semi-definite there (friction_min_eigenvalue in the metrics)")
         out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
-                   f"states: {cause}, so this S is not an entropy of the model's flow. Where L and S are learned, L grad S = 0 is a penalty by "
+                   f"states: {cause}, so this S is not an entropy of the model's flow. "
+                   "Where L and S are learned, L grad S = 0 is a penalty by "
                    "default and --degeneracy exact makes it exact (it can cost accuracy, see "
                    "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
                    "default S is then learned of the variables L leaves free, where L has "

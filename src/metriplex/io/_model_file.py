@@ -29,7 +29,10 @@ FORMAT_VERSION = 1
 
 def save(path: str | os.PathLike, model: GenericModel, *, n: int,
          names: Sequence[str] = (), extra: dict[str, Any] | None = None) -> None:
-    """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle)."""
+    """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle). ``n``: its number
+    of state variables; ``names``: none, or one string per variable; ``extra``: fields kept in
+    the header (strict JSON). Checked before anything is written, as :func:`load` checks."""
+    _check_saveable(path, model, n, names)
     header = {
         "format": "metriplex-model",
         "format_version": FORMAT_VERSION,
@@ -40,12 +43,45 @@ def save(path: str | os.PathLike, model: GenericModel, *, n: int,
         "model": model.spec(),
         "extra": extra or {},
     }
+    try:
+        line = json.dumps(header, allow_nan=False)
+    except (TypeError, ValueError) as e:
+        raise MetriplexError(
+            f"cannot save the model: its extra fields are not strict JSON ({e}). Give numbers, "
+            "strings, lists and dicts of them, without NaN or infinity."
+        ) from None
     buf = _io.BytesIO()
     buf.write(MAGIC)
-    buf.write(json.dumps(header).encode() + b"\n")
+    buf.write(line.encode() + b"\n")
     eqx.tree_serialise_leaves(buf, model)
     with atomic_write(path, "wb") as f:
         f.write(buf.getvalue())
+
+
+def _check_saveable(path, model, n, names) -> None:
+    """Refuse a model file that :func:`load` would refuse, before writing it."""
+    if not isinstance(model, GenericModel):
+        raise MetriplexError(
+            f"save writes a GenericModel (or a ground-truth system's .model); got "
+            f"{type(model).__name__}."
+        )
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise MetriplexError(f"save needs n, the number of state variables, >= 1; got {n!r}.")
+    size = model.size()
+    if size is not None and size != n:
+        raise MetriplexError(
+            f"save got n={n}, but the model has {size} state variables; pass n={size}."
+        )
+    names = list(names)
+    if names and (len(names) != n or not all(isinstance(v, str) for v in names)):
+        raise MetriplexError(
+            f"save's names must be empty or {n} strings, one per variable; got {names!r}."
+        )
+    if Path(path).is_dir():
+        raise MetriplexError(
+            f"cannot save the model to {str(path)!r}: it is a folder; give a file name such as "
+            f"{str(Path(path) / 'model.mpx')!r}."
+        )
 
 
 def read_header(path: str | os.PathLike) -> dict[str, Any]:
