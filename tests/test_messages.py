@@ -520,3 +520,19 @@ def test_a_horizon_without_a_step_is_null_not_zero():
     assert short["rollout_error_to_horizon_mean"] is None
     assert short["constant_prediction_error_to_horizon_mean"] is None
     assert "no step within the horizon" in short["null_reasons"]["rollout_error_to_horizon_mean"]
+
+
+def test_a_generic_model_of_blocks_that_do_not_fit_is_refused():
+    k1, k2 = jr.split(jr.key(0))
+    energy, friction = mx.MLPPotential(3, width=4, depth=1, key=k1), mx.ZeroFriction(3)
+    with pytest.raises(mx.MetriplexError, match=r"poisson must be an AbstractPoisson block .*"
+                       r"got CholeskyFriction"):
+        mx.GenericModel(energy, mx.SumOf((2,)), mx.CholeskyFriction(3, width=4, key=k2),
+                        friction)
+    with pytest.raises(mx.MetriplexError, match=r"different numbers of state variables: "
+                       r"\{'poisson': 4, 'friction': 3"):
+        mx.GenericModel(energy, mx.SumOf((2,)), mx.CanonicalPoisson(4, 1), friction)
+    with pytest.raises(mx.MetriplexError, match=r"SumOf\(5,\) names variables outside \[0, 2\]"):
+        mx.GenericModel(energy, mx.SumOf((5,)), mx.CanonicalPoisson(3, 1), friction)
+    with pytest.raises(mx.MetriplexError, match="poisson must be an AbstractPoisson block"):
+        mx.GenericModel(energy, mx.SumOf((2,)), None, friction)

@@ -71,6 +71,11 @@ class AbstractModel(eqx.Module):
         known functions only)."""
 
 
+_EXAMPLES = {"energy": "MLPPotential or Known", "entropy": "MLPPotential, SumOf or Known",
+             "poisson": "CanonicalPoisson or SkewMLPPoisson",
+             "friction": "CholeskyFriction or ZeroFriction"}
+
+
 class GenericModel(AbstractModel):
     r"""A GENERIC system built from four blocks, each learned or given.
 
@@ -94,6 +99,38 @@ class GenericModel(AbstractModel):
     entropy: AbstractPotential
     poisson: AbstractPoisson
     friction: AbstractFriction
+
+    def __check_init__(self) -> None:
+        from ._errors import MetriplexError
+        from .structure.potential import SumOf
+
+        for role, block, kind in (("energy", self.energy, AbstractPotential),
+                                  ("entropy", self.entropy, AbstractPotential),
+                                  ("poisson", self.poisson, AbstractPoisson),
+                                  ("friction", self.friction, AbstractFriction)):
+            if not isinstance(block, kind):
+                raise MetriplexError(
+                    f"GenericModel's {role} must be an {kind.__name__} block (such as "
+                    f"{_EXAMPLES[role]}); got {type(block).__name__}."
+                )
+        sizes = {role: n for role, n in (
+            ("poisson", self.poisson.n), ("friction", self.friction.n),
+            ("energy", self.energy.n if isinstance(self.energy, MLPPotential) else None),
+            ("entropy", self.entropy.n if isinstance(self.entropy, MLPPotential) else None),
+        ) if n is not None}
+        if len(set(sizes.values())) > 1:
+            raise MetriplexError(
+                f"GenericModel's blocks are made for different numbers of state variables: "
+                f"{sizes}; build every block for the data's n."
+            )
+        n = next(iter(sizes.values()), None)
+        for role, block in (("energy", self.energy), ("entropy", self.entropy)):
+            if isinstance(block, SumOf) and n is not None and not all(
+                    0 <= i < n for i in block.indices):
+                raise MetriplexError(
+                    f"GenericModel's {role} SumOf{block.indices} names variables outside "
+                    f"[0, {n - 1}] of its {n} state variables."
+                )
 
     def terms(self, x: State) -> Terms:
         """Everything GENERIC evaluates at the state ``x``, computed once: the potentials, their
