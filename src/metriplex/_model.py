@@ -9,11 +9,12 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._errors import MetriplexError
 from ._types import Array, Float, Matrix, Scalar, State
 from .structure import _registry
 from .structure.friction import AbstractFriction
 from .structure.poisson import AbstractPoisson
-from .structure.potential import AbstractPotential, MLPPotential
+from .structure.potential import AbstractPotential, MLPPotential, SumOf
 
 if TYPE_CHECKING:
     import numpy as np
@@ -101,9 +102,6 @@ class GenericModel(AbstractModel):
     friction: AbstractFriction
 
     def __check_init__(self) -> None:
-        from ._errors import MetriplexError
-        from .structure.potential import SumOf
-
         for role, block, kind in (("energy", self.energy, AbstractPotential),
                                   ("entropy", self.entropy, AbstractPotential),
                                   ("poisson", self.poisson, AbstractPoisson),
