@@ -536,3 +536,11 @@ def test_a_generic_model_of_blocks_that_do_not_fit_is_refused():
         mx.GenericModel(energy, mx.SumOf((5,)), mx.CanonicalPoisson(3, 1), friction)
     with pytest.raises(mx.MetriplexError, match="poisson must be an AbstractPoisson block"):
         mx.GenericModel(energy, mx.SumOf((2,)), None, friction)
+
+
+def test_selecting_ids_that_the_data_lack_says_which_ids_there_are():
+    data = oscillator_data()
+    with pytest.raises(mx.MetriplexError, match=r"none of the ids \[99\] is in these data, whose "
+                       r"4 trajectories have ids 0 to 3"):
+        data.select([99])
+    assert list(data.select([1, 99]).ids) == [1]  # ids the data lack are ignored, as documented

@@ -288,6 +288,13 @@ class Trajectories:
         """The trajectories whose ids are in ``ids`` (in the order of their ids; ids that the data
         lack are ignored)."""
         m = np.isin(self.trajectory, np.asarray(ids))
+        if not m.any() and len(ids):
+            have = self.ids
+            raise MetriplexError(
+                f"none of the ids {[int(i) for i in ids][:8]} is in these data, whose "
+                f"{len(have)} trajectories have ids {int(have.min())} to {int(have.max())}; "
+                "choose among those."
+            )
         return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
 
     def pairs(self, dtype: DTypeLike | None = None) -> Pairs:
