@@ -8,16 +8,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from .data import state_statistics
+
 
 def standardised_errors(pred: np.ndarray, obs: np.ndarray, lengths: np.ndarray,
                         x: np.ndarray) -> list[float]:
     r"""Per trajectory, :math:`|D^{-1}(\hat x - x)| / |D^{-1}(x - \bar x)|` over its states,
-    with :math:`\bar x` and :math:`D` = diag(standard deviations) of the data's states ``x``
-    (a constant variable counts in its own units); ``inf`` for a rollout that failed.
+    with :math:`\bar x` and :math:`D` of the data's states ``x`` as
+    :func:`~metriplex.data.state_statistics` gives them (a constant variable in its own units); ``inf`` for a rollout that failed.
     ``pred`` and ``obs``: padded ``(K, T, n)``; ``lengths``: each trajectory's length."""
-    mean = np.mean(x, axis=0)
-    d = np.std(x, axis=0)
-    d = np.where(d > 0, d, 1.0)
+    mean, d, _ = state_statistics(x)
     out = []
     for k, T in enumerate(lengths):
         p, o = pred[k, :T], obs[k, :T]

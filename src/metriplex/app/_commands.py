@@ -313,7 +313,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
-    for line in time_unit_warning(run_config(args.run).get("units") or {}, data):
+    run = run_config(args.run)
+    for line in time_unit_warning(run.get("units") or {}, data):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
     if failed:
@@ -331,7 +332,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
         from .runs import training_outcome
         from ..verdict import verdict
 
-        cfg = run_config(args.run).get("config", {})
+        cfg = run.get("config", {})
         ended = training_outcome(args.run)
         metrics["verdict"] = verdict(
             model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],

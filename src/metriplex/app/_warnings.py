@@ -153,12 +153,14 @@ def time_unit_warning(units: dict, data: Trajectories) -> list[str]:
     from ..data import time_scale
 
     trained = units.get("time")
-    if not trained or len(data.x) < 2 or len(data.pairs().dt) == 0:
+    pairs = data.pairs()
+    if not trained or len(pairs.dt) == 0:
         return []
-    ratio = time_scale(data.pairs()) / float(trained)
+    tau = time_scale(pairs)
+    ratio = tau / float(trained)
     if 1.0 / TIME_SCALE_FACTOR <= ratio <= TIME_SCALE_FACTOR:
         return []
     return [f"warning: these data move on a time scale {ratio:.3g} times the training data's "
-            f"({time_scale(data.pairs()):.3g} against {float(trained):.3g} time units): is "
+            f"({tau:.3g} against {float(trained):.3g} time units): is "
             "their time in the same unit (s, ms, h) as the training data's? The model's "
             "steps are taken in the training data's unit."]
