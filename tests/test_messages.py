@@ -13,6 +13,7 @@ import os
 import re
 import subprocess
 
+import jax
 import jax.numpy as jnp
 import jax.random as jr
 import numpy as np
@@ -501,6 +502,10 @@ def test_solve_and_evaluate_name_a_wrong_argument():
             mx.evaluate(model, data, horizon=bad)
     with pytest.raises(mx.MetriplexError, match="validation must be a fraction"):
         mx.fit(model, data, validation="0.2", steps=1, progress=False, key=jr.key(0))
+    # The data's width, said as such (it was "x0 has 3 state variables", of no x0 passed).
+    with pytest.raises(mx.MetriplexError, match="the data have 3 state variables but the model "
+                       "expects 4"):
+        mx.evaluate(small_model(4), data)
 
 
 def test_integer_states_and_states_narrower_than_the_model_roll_out():
@@ -544,3 +549,47 @@ def test_selecting_ids_that_the_data_lack_says_which_ids_there_are():
                        r"4 trajectories have ids 0 to 3"):
         data.select([99])
     assert list(data.select([1, 99]).ids) == [1]  # ids the data lack are ignored, as documented
+
+
+def test_fit_refuses_a_dtype_or_checkpoint_it_cannot_use_before_training(tmp_path):
+    data, model = oscillator_data(), small_model()
+    for dtype in (jnp.float16, jnp.int32, "complex64"):
+        with pytest.raises(mx.MetriplexError, match="dtype= must be float32 or float64"):
+            mx.fit(model, data, steps=5, dtype=dtype, progress=False, key=jr.key(0))
+    with jax.enable_x64(False), pytest.raises(mx.MetriplexError,
+                                              match="dtype=float64 needs JAX's x64 mode"):
+        mx.fit(model, data, steps=5, dtype="float64", progress=False, key=jr.key(0))
+    # A folder as the checkpoint's file used to fail at the first write, after the training.
+    with pytest.raises(mx.MetriplexError, match=r"path must name a file; .* is a folder\. "
+                       r"Example: Checkpoint\(.*checkpoint\.ckpt'\)"):
+        mx.fit(model, data, steps=5, progress=False, key=jr.key(0),
+               checkpoint=mx.Checkpoint(tmp_path))
+
+
+@pytest.mark.parametrize("pieces,pattern", [
+    ([(np.arange(5.0), np.zeros((5, 3))), (np.arange(5.0), np.zeros((5, 4)))],
+     "trajectory 0 has 3 and trajectory 1 has 4"),
+    ([(np.arange(5.0), np.zeros((6, 3)))], r"shape \(5, n\) for its 5 times; got shape \(6, 3\)"),
+    ([(np.arange(5.0), np.zeros((5, 3, 2)))], r"got shape \(5, 3, 2\)"),  # was flattened to 6
+    ([np.zeros((5, 3))], r"one \(t, x\) pair per trajectory; item 0 is ndarray \(5, 3\)"),
+])
+def test_trajectories_from_a_list_of_the_wrong_shape_are_refused(pieces, pattern):
+    with pytest.raises(mx.MetriplexError, match=pattern):
+        mx.Trajectories.from_list(pieces)
+
+
+def test_trajectories_from_arrays_of_the_wrong_shape_are_refused():
+    with pytest.raises(mx.MetriplexError, match=r"xs \(2, 6, 3\) and ts \(5,\)"):
+        mx.Trajectories.from_arrays(np.arange(5.0), np.zeros((2, 6, 3)))
+    data = mx.Trajectories.from_arrays(np.arange(6.0), np.zeros((2, 6, 3)))
+    assert len(data) == 2 and data.n == 3
+
+
+def test_a_history_prints_as_a_summary_not_its_lists():
+    from metriplex.train import History
+
+    history = History(step=list(range(0, 50_000, 10)), train={"total": [0.1] * 5_000},
+                      best_step=4_200, best_valid=1.5e-3, stopped="converged")
+    text = repr(history)
+    assert len(text) < 300, text  # the lists made 86 KB
+    assert "5000 evaluations to step 49990" in text and "best_step=4200" in text

@@ -30,7 +30,8 @@ def load(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
     path = Path(path)
     if not path.exists():
         raise MetriplexError(
-            f"no checkpoint at {str(path)!r}; nothing to resume. Start the run without --resume."
+            f"no checkpoint at {str(path)!r}; nothing to resume. Start without resuming "
+            "(Checkpoint(..., resume=False); on the command line, without --resume)."
         )
     with open(path, "rb") as f:
         if f.read(len(MAGIC)) != MAGIC:

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._errors import MetriplexError
-from .data import Pairs, Trajectories
+from .data import Pairs, Trajectories, check_width
 from ._loss_base import Batch, Runs, Window
 
 if TYPE_CHECKING:
@@ -71,11 +71,8 @@ class PairRows(NamedTuple):
     def check(self, n: int | None, what: str) -> None:
         if self.count == 0:
             raise MetriplexError(f"{what} data hold no pairs; each trajectory needs >= 2 samples.")
-        if n is not None and self.x.shape[1] != n:
-            raise MetriplexError(
-                f"the data have {self.x.shape[1]} state variables but the model expects {n}; "
-                f"build the model for {self.x.shape[1]} variables or select matching columns."
-            )
+        if n is not None:
+            check_width(self.x.shape[1], n)
         bad = ~np.isfinite(self.dt) | (self.dt <= 0)
         if np.any(bad):
             raise MetriplexError(

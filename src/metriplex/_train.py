@@ -15,6 +15,7 @@ import dataclasses
 import functools
 import math
 import os
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import equinox as eqx
@@ -53,6 +54,13 @@ class History:
     stopped: str = ""
     converged: bool = False
     lbfgs_steps: int = 0
+
+    def __repr__(self) -> str:
+        # A summary: the lists hold one entry per evaluation (thousands in a long run).
+        last = self.step[-1] if self.step else 0
+        return (f"History({len(self.step)} evaluations to step {last}, best_step={self.best_step}, "
+                f"best_valid={self.best_valid:.4g}, best_rollout={self.best_rollout:.4g}, "
+                f"stopped={self.stopped!r}, terms={sorted(self.train)})")
 
     def to_json(self) -> dict[str, Any]:
         """The history as a JSON-able dict (``history.json`` of a run folder)."""
@@ -299,6 +307,28 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
             f"input_noise must be in [0, 1) (a fraction of each variable's standard "
             f"deviation); got {input_noise}."
         )
+    if checkpoint is not None and Path(checkpoint.path).is_dir():
+        raise MetriplexError(
+            f"Checkpoint's path must name a file; {str(checkpoint.path)!r} is a folder. "
+            f"Example: Checkpoint({str(Path(checkpoint.path) / 'checkpoint.ckpt')!r}).")
+
+
+def training_dtype(dtype: Any) -> np.dtype:
+    """``fit``'s ``dtype=``, checked: float32, or float64 where JAX has x64 enabled."""
+    try:
+        checked = np.dtype(dtype)
+    except TypeError:
+        checked = None
+    if checked not in (np.dtype(np.float32), np.dtype(np.float64)):
+        raise MetriplexError(
+            f"fit's dtype= must be float32 or float64 (jnp.float32, jnp.float64); got "
+            f"{getattr(checked, 'name', None) or repr(dtype)}.")
+    if checked == np.float64 and not jax.config.jax_enable_x64:
+        raise MetriplexError(
+            "fit's dtype=float64 needs JAX's x64 mode, which is off: call "
+            "`jax.config.update('jax_enable_x64', True)` before creating any array, or train "
+            "in float32.")
+    return checked
 
 
 def split_validation(data: Trajectories | Pairs | tuple[ArrayLike, ArrayLike, ArrayLike],

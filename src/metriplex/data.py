@@ -99,6 +99,14 @@ def observed_rates(pairs: "Pairs | Trajectories", rows: int = 1 << 16) -> Iterat
             pairs.dt[s : s + rows], np.float64)[:, None]
 
 
+def check_width(have: int, n: int) -> None:
+    """Refuse data of ``have`` state variables for a model of ``n``."""
+    if have != n:
+        raise MetriplexError(
+            f"the data have {have} state variables but the model expects {n}; build the model "
+            f"for {have} variables or select matching columns.")
+
+
 def uniform_times(trajectory: ArrayLike, dt: float) -> np.ndarray:
     r"""The uniform time grid :math:`t = k\,\Delta t` of each row: ``k`` counts the rows of the
     same trajectory id before it, in file order (what ``--dt`` gives instead of a file's own
@@ -226,14 +234,29 @@ class Trajectories:
     def from_list(
         cls, trajectories: Sequence[tuple[np.ndarray, np.ndarray]], names: Sequence[str] = ()
     ) -> "Trajectories":
-        """From a list of ``(t, x)`` with ``t`` of shape ``(T_k,)`` and ``x`` of ``(T_k, n)``."""
+        """From a list of ``(t, x)`` with ``t`` of shape ``(T_k,)`` and ``x`` of ``(T_k, n)``
+        (or ``(T_k,)`` for one variable), one pair per trajectory."""
         if len(trajectories) == 0:
             raise MetriplexError("no trajectories given; pass at least one (t, x) pair.")
         ids, ts, xs = [], [], []
-        for k, (t, x) in enumerate(trajectories):
-            t = np.asarray(t, dtype=np.float64).reshape(-1)
-            x = np.asarray(x, dtype=np.float64)
-            x = x.reshape(len(t), -1)
+        for k, pair in enumerate(trajectories):
+            if not isinstance(pair, (tuple, list)) or len(pair) != 2:
+                raise MetriplexError(
+                    f"Trajectories.from_list takes one (t, x) pair per trajectory; item {k} is "
+                    f"{type(pair).__name__} {np.shape(pair)}. Pass [(t0, x0), (t1, x1), ...], or "
+                    "Trajectories.from_arrays(ts, xs) for arrays of equal length.")
+            t = np.asarray(pair[0], dtype=np.float64).reshape(-1)
+            x = np.asarray(pair[1])
+            if x.ndim == 1:
+                x = x[:, None]
+            if x.ndim != 2 or len(x) != len(t):
+                raise MetriplexError(
+                    f"trajectory {k}: x must have one row per time, shape ({len(t)}, n) for its "
+                    f"{len(t)} times; got shape {x.shape}.")
+            if xs and x.shape[1] != xs[0].shape[1]:
+                raise MetriplexError(
+                    f"every trajectory needs the same variables; trajectory 0 has "
+                    f"{xs[0].shape[1]} and trajectory {k} has {x.shape[1]}.")
             ids.append(np.full(len(t), k))
             ts.append(t)
             xs.append(x)
@@ -244,7 +267,14 @@ class Trajectories:
                     names: Sequence[str] = ()) -> "Trajectories":
         """From a shared grid ``ts`` (T,) or per-trajectory grids (K, T) and ``xs`` (K, T, n)."""
         xs = np.asarray(xs)
-        ts = np.broadcast_to(np.asarray(ts, dtype=np.float64), xs.shape[:2])
+        ts = np.asarray(ts, dtype=np.float64)
+        if xs.ndim != 3 or ts.ndim not in (1, 2) or ts.shape[-1] != xs.shape[1] or (
+                ts.ndim == 2 and len(ts) not in (1, len(xs))):
+            raise MetriplexError(
+                "Trajectories.from_arrays takes xs of shape (K, T, n) and ts of shape (T,) or "
+                f"(K, T); got xs {xs.shape} and ts {ts.shape}. For trajectories of different "
+                "lengths use Trajectories.from_list([(t0, x0), (t1, x1), ...]).")
+        ts = np.broadcast_to(ts, xs.shape[:2])
         return cls.from_list(list(zip(ts, xs)), names)
 
     # -- views ----------------------------------------------------------------------------------

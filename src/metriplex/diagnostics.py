@@ -41,9 +41,9 @@ from ._entropy_production import (  # noqa: F401 (re-exported)
 from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import structure_residuals
-from .data import Trajectories, state_scale
+from .data import Trajectories, check_width, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
-from .integrate import AbstractScheme, CrankNicolson, Rollout, solve
+from .integrate import AbstractScheme, CrankNicolson, Rollout, model_size, solve
 from ._progress import progress_bar
 from ._threads import cpu_threads, in_this_threads_config
 from ._sensitivity import SENSITIVITY_REFINE as SENSITIVITY_REFINE
@@ -353,6 +353,7 @@ def _check_inputs(model, data, scheme, horizon) -> None:
         raise MetriplexError(
             f"scheme must be a scheme object such as metriplex.CrankNicolson(); got {scheme!r}."
         )
+    check_width(data.n, model_size(model))
     if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, Real)
                                 or not np.isfinite(horizon) or horizon <= 0):
         raise MetriplexError(f"horizon must be a time > 0 (from each trajectory's start); got "

@@ -36,6 +36,7 @@ from ._train import (
     batch_sharding,
     check_arguments,
     split_validation,
+    training_dtype,
     spread,
 )
 from ._pairs import PairRows, PairStore
@@ -168,7 +169,7 @@ def fit(
         stopping = dataclasses.replace(stopping, patience=patience)
     loss = CrankNicolsonResidual().as_loss() if loss is None else loss.as_loss()
     n = model_size(model)
-    dtype = float_dtype(model, default=jnp.float32) if dtype is None else dtype
+    dtype = float_dtype(model, default=jnp.float32) if dtype is None else training_dtype(dtype)
     train_data, valid_data = split_validation(data, validation, seed_split)
     # The pairs are rows of the states (no copy of them), checked once.
     train_rows = PairRows.of(train_data, n, "training")
