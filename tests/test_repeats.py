@@ -129,6 +129,7 @@ def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(traine
     assert history.best_rollout == min(scores) == scores[header["kept_training"]]
     assert scores[0] != scores[1]  # another initialisation, another model
     assert (out / "checkpoint.ckpt").is_file() and (out / "checkpoint-2.ckpt").is_file()
+    assert not list(out.glob("first-stage*"))  # the stages' checkpoints go when the run ends
     assert "training 2 of at most 2" in capsys.readouterr().err
     # --resume of a finished run finds both trainings done and keeps the same model.
     _, again, *_ = train_run(data, config, out, resume=True, progress=False, **split)
@@ -137,9 +138,11 @@ def test_a_run_trains_again_and_resumes_each_training_from_its_checkpoint(traine
         header["kept_training"]
 
 
-def test_an_interrupted_train_says_whether_there_is_anything_to_resume(tmp_path):
-    # Ctrl-C before the first checkpoint (in the stages before the main training) keeps
-    # nothing: --resume would refuse, and so would a plain train into the non-empty folder.
+@pytest.mark.parametrize("kept", ["checkpoint.ckpt", "first-stage.ckpt", "held-stage.ckpt"])
+def test_an_interrupted_train_says_whether_there_is_anything_to_resume(tmp_path, kept):
+    # Ctrl-C before the first checkpoint (in the choice of initialisation) keeps nothing:
+    # --resume would refuse, and so would a plain train into the non-empty folder. The
+    # checkpoint of the main training or of a stage before it can be resumed.
     import argparse
 
     from metriplex.app.cli import _what_is_kept
@@ -152,6 +155,7 @@ def test_an_interrupted_train_says_whether_there_is_anything_to_resume(tmp_path)
     with pytest.raises(mx.MetriplexError, match="Start it again with --overwrite instead of "
                        "--resume"):
         check_run_folder(tmp_path, resume=True)
-    (tmp_path / "checkpoint.ckpt").write_bytes(b"")
+    (tmp_path / kept).write_bytes(b"")
     assert "--resume" in _what_is_kept(args)
+    check_run_folder(tmp_path, resume=True)
     assert _what_is_kept(argparse.Namespace(command="evaluate", out=str(tmp_path))) == ""

@@ -106,9 +106,10 @@ def test_divergence_is_reported_and_best_model_kept():
     assert np.all(np.isfinite(np.asarray(_fields(best, x))))
 
 
-# The interrupted run: `metriplex train` whose process SIGKILLs itself right after writing the
-# checkpoint at step KILL_AT (of STEPS): a real kill in mid-run (no cleanup, the lock left
-# behind, no model), at a step fixed in advance rather than after a guessed sleep.
+# The interrupted run: `metriplex train` whose process SIGKILLs itself right after its first
+# stage (--reversible-first, on by default for RUN_OPTS) writes its checkpoint at step KILL_AT
+# (of STEPS): a real kill in mid-run (no cleanup, the lock left behind, no model), at a step
+# fixed in advance rather than after a guessed sleep.
 STEPS, KILL_AT = 400, 200
 KILLED_TRAIN = textwrap.dedent(
     f"""
@@ -120,7 +121,7 @@ KILLED_TRAIN = textwrap.dedent(
 
     def write_then_die(path, tree, meta):
         write(path, tree, meta)
-        if meta["done"] >= {KILL_AT}:
+        if os.path.basename(path) == "first-stage.ckpt" and meta["done"] >= {KILL_AT}:
             os.kill(os.getpid(), signal.SIGKILL)
 
     checkpoint.save = write_then_die
@@ -146,7 +147,10 @@ def _checkpoint_step(path) -> int:
         return json.loads(f.readline())["done"]
 
 
-def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
+def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path, monkeypatch):
+    """Killed in the first stage, then interrupted in the main one: each resumed from its own
+    checkpoint, the run ends with the model and history of the uninterrupted one."""
+    import metriplex._checkpoint as checkpoint
     from metriplex.config import RunConfig
     from metriplex.runs import train_run
 
@@ -165,17 +169,31 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     full = RunConfig(entropy="sum:2", poisson="canonical:1", eval_every=50, checkpoint_every=1,
                      width=8, batch_size=64, float64=True, steps=STEPS)
     train_run(data, full, tmp_path / "full", progress=False)
+    assert not list((tmp_path / "full").glob("first-stage*"))  # removed when the run ends
     cut = subprocess.run([sys.executable, "-c", KILLED_TRAIN, "train", str(tmp_path / "d.npz"),
                           "--out", str(tmp_path / "cut"), *opts],
                          capture_output=True, text=True, env=env, timeout=600)
     assert cut.returncode == -signal.SIGKILL, (cut.returncode, cut.stderr)
     assert not (tmp_path / "cut" / "model.mpx").exists(), "the run finished before the kill"
-    assert _checkpoint_step(tmp_path / "cut" / "checkpoint.ckpt") == KILL_AT
+    assert not (tmp_path / "cut" / "checkpoint.ckpt").exists(), "killed after the first stage"
+    assert _checkpoint_step(tmp_path / "cut" / "first-stage.ckpt") == KILL_AT
     assert (json.loads((tmp_path / "cut" / "config.json").read_text())["config"]
             == json.loads((tmp_path / "full" / "config.json").read_text())["config"])
     # Resumed here by the training that `train --resume` runs (its command line's resume:
     # test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes), without the evaluation
-    # and figures after it.
+    # and figures after it; interrupted (as Ctrl-C does) in the main stage at step KILL_AT.
+    write, pressed = checkpoint.save, []
+
+    def write_then_interrupt(path, tree, meta):
+        write(path, tree, meta)
+        if Path(path).name == "checkpoint.ckpt" and meta["done"] == KILL_AT and not pressed:
+            pressed.append(KILL_AT)
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(checkpoint, "save", write_then_interrupt)
+    _, h, *_ = train_run(data, full, tmp_path / "cut", resume=True, progress=False)
+    assert h.stopped == f"interrupted at step {KILL_AT}"
+    monkeypatch.setattr(checkpoint, "save", write)
     train_run(data, full, tmp_path / "cut", resume=True, progress=False)
     a = mx.load(tmp_path / "full")
     b = mx.load(tmp_path / "cut")
@@ -186,13 +204,15 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path):
     hb = json.loads((tmp_path / "cut" / "history.json").read_text())
     assert ha["step"] == hb["step"] and ha["step"][-1] == STEPS
     np.testing.assert_allclose(ha["valid"]["total"], hb["valid"]["total"], rtol=1e-9)
+    assert not list((tmp_path / "cut").glob("first-stage*"))
 
 
 def test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes(tmp_path, monkeypatch, capsys):
     """Ctrl-C pressed during `metriplex train`, in this process: the command's own handling
     (exit status 130, what it says, the checkpoint, model and history it keeps, the resumed run
-    continuing that history). The press is sent right after the first checkpoint is written,
-    so the run is inside the training loop. The same through a real process and an
+    continuing that history). The press is sent right after the main training's first
+    checkpoint is written, so the run is inside its training loop (a kill in the first stage:
+    test_resume_after_sigkill_matches_uninterrupted_run). The same through a real process and an
     asynchronous signal: ``test_ctrl_c_saves_a_checkpoint_and_the_run_resumes`` (slow); the
     handler itself: tests/test_interrupt.py."""
     import metriplex._checkpoint as checkpoint
@@ -203,7 +223,7 @@ def test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes(tmp_path, monkey
 
     def write_then_press(path, tree, meta):
         write(path, tree, meta)
-        if not pressed:
+        if not pressed and Path(path).name == "checkpoint.ckpt":  # in the main training
             pressed.append(meta["done"])
             os.kill(os.getpid(), signal.SIGINT)
 

@@ -54,10 +54,31 @@ def repeats_for(config: RunConfig, valid: Trajectories | None) -> int:
     return REPEATS if config.repeats is None else config.repeats
 
 
-def checkpoint_path(out: Path, repeat: int) -> Path:
+#: The stages before the main training that keep checkpoints of their own (``--reversible-first``
+#: and ``--hold-energy``), by the names of their files.
+STAGES = ("first-stage", "held-stage")
+
+
+def checkpoint_path(out: Path, repeat: int, stage: str = "") -> Path:
     """Training ``repeat``'s checkpoint (0 based): the first one's is ``checkpoint.ckpt``, as
-    without repeats; the second's ``checkpoint-2.ckpt``, and so on."""
-    return out / ("checkpoint.ckpt" if repeat == 0 else f"checkpoint-{repeat + 1}.ckpt")
+    without repeats; the second's ``checkpoint-2.ckpt``, and so on. A ``stage`` of
+    :data:`STAGES` names its own: ``first-stage.ckpt``, ``first-stage-2.ckpt``, ..."""
+    stem = stage or "checkpoint"
+    return out / (f"{stem}.ckpt" if repeat == 0 else f"{stem}-{repeat + 1}.ckpt")
+
+
+def left_checkpoint(out: Path, repeat: int) -> bool:
+    """Whether training ``repeat`` left a checkpoint to resume from, of its main training or
+    of a stage before it."""
+    return any(checkpoint_path(out, repeat, stage).is_file() for stage in ("", *STAGES))
+
+
+def remove_stage_checkpoints(out: Path) -> None:
+    """Remove the stages' checkpoints of a finished run (its trainings' own stay, for
+    ``--resume`` with more steps)."""
+    for path in out.glob("*.ckpt"):
+        if path.name.startswith(STAGES):
+            path.unlink(missing_ok=True)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,18 +112,25 @@ class Training:
         m_key, f_key = self.keys if r == 0 else tuple(jr.fold_in(k, r) for k in self.keys)
         model = self.first if r == 0 else build_model(
             config, train, key=m_key, units=self.units, constant=self.constant, given=self.given)
-        if not resumed:
+        main = resumed and checkpoint_path(self.out, r).is_file()
+        if not main:  # the stages before the main one, each resumed from its own checkpoint
+
+            def checkpoint(stage: str) -> Checkpoint:
+                path = checkpoint_path(self.out, r, stage)
+                return Checkpoint(path, every=config.checkpoint_every,
+                                  resume=resumed and path.is_file())
+
             model = before_main(model, config, train, valid, units=self.units,
                                 constant=self.constant, given=self.given, dtype=self.dtype,
                                 model_key=m_key, loss=self.loss, key=jr.fold_in(f_key, 1),
-                                progress=self.progress,
+                                progress=self.progress, checkpoint=checkpoint,
                                 max_seconds=left_of(self.budget, self.began))
         return fit(
             with_dtype(model, self.dtype), train, loss=self.loss, validation=valid,
             max_seconds=left_of(self.budget, self.began), scale=self.units.rate,
             dtype=self.dtype, progress=self.progress,
             checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
-                                  resume=resumed),
+                                  resume=main),
             data_parallel=config.data_parallel,
             finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
             input_noise=config.input_noise, key=f_key, **fit_settings(config))
@@ -150,7 +178,7 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
                   keep: Callable[[GenericModel, History], None],
                   ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
-    ``resume`` and training ``r`` left a checkpoint); the next runs only while the best so far
+    ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only while the best so far
     is not :attr:`Outcome.good`, the last one converged or diverged (one that a step budget
     ended wants more steps, not another start), the wall-time ``budget`` (seconds from
     ``began``) lasts and no training was interrupted. Returns ``(best model, its history,
@@ -168,7 +196,7 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
             print(_again_line(r, repeats, best), file=sys.stderr)
         start = time.perf_counter()
         try:
-            model, history = one(r, resume and checkpoint_path(out, r).is_file())
+            model, history = one(r, resume and left_checkpoint(out, r))
         except TrainingDiverged as e:
             diverged = e
             outcomes.append(Outcome(math.inf, 0, 0, str(e), time.perf_counter() - start,
@@ -177,8 +205,8 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
         except KeyboardInterrupt:
             if best is None:
                 raise
-            # Ctrl-C before training r's first checkpoint (in its first stage): the best
-            # model so far is the run's; --resume goes on with training r from its start.
+            # Ctrl-C in a stage before training r's main one: the best model so far is the
+            # run's; --resume goes on with training r from its stage's checkpoint, if any.
             best[1].stopped = f"interrupted in training {r + 1}"
             break
         outcome = Outcome.of(history, time.perf_counter() - start)

@@ -20,7 +20,7 @@ from .._units import Units
 from ..data import Trajectories
 from ..losses import Loss
 from ..structure import Known
-from ..train import fit
+from ..train import Checkpoint, fit
 from ._build import Given, build_loss, build_model, fit_settings
 from .config import (LEARNED_POISSON, RunConfig, confine_on, hold_energy_on,
                      reversible_first_on, temperature_weight)
@@ -105,20 +105,23 @@ def _best_initialisation(config: RunConfig, key: jax.Array, *, starts: int, labe
 
 def _stage(start: GenericModel, config: RunConfig, train: Trajectories,
            valid: Trajectories | None, *, loss: Any, units: Units, dtype: DTypeLike,
-           key: jax.Array, progress: bool, max_seconds: float | None) -> tuple[GenericModel, str]:
+           key: jax.Array, progress: bool, max_seconds: float | None,
+           checkpoint: Checkpoint | None = None) -> tuple[GenericModel, str]:
     """A stage before the main one, trained from ``start`` with ``config``'s settings and kept
-    by its validation loss, not by held-out rollouts: ``(model, how it stopped)``."""
+    by its validation loss, not by held-out rollouts: ``(model, how it stopped)``. With a
+    ``checkpoint`` an interrupted stage is kept there, and resumed from it where it says so."""
     try:
         fitted, history = fit(start, train, loss=loss, validation=valid, max_seconds=max_seconds,
                               scale=units.rate, dtype=dtype, progress=progress,
-                              rollout_check=None, key=key, **fit_settings(config))
+                              rollout_check=None, checkpoint=checkpoint, key=key,
+                              **fit_settings(config))
         stopped = history.stopped
     except TrainingDiverged as e:
         # The main training starts from the best model before the divergence (or the untrained
         # one) and meets the same settings: it keeps and saves its own best model.
         fitted, stopped = (start if e.model is None else e.model), str(e)
     if stopped.startswith("interrupted"):
-        # Nothing of these stages is checkpointed: stop the whole training, as Ctrl-C asks.
+        # Stop the whole training, as Ctrl-C asks (the stage's checkpoint, if any, keeps it).
         raise KeyboardInterrupt
     return fitted, stopped
 
@@ -126,7 +129,8 @@ def _stage(start: GenericModel, config: RunConfig, train: Trajectories,
 def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories,
                      valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
                      dtype: DTypeLike, key: jax.Array, main_loss: Loss,
-                     progress: bool = False, max_seconds: float | None = None) -> GenericModel:
+                     progress: bool = False, max_seconds: float | None = None,
+                     checkpoint: Callable[[str], Checkpoint] | None = None) -> GenericModel:
     r"""``model`` with its energy (and its learned L) taken from a first training of the same
     configuration with no friction, :math:`\dot x = L\nabla E` alone (and, with
     ``--hold-energy``, the rest then trained to that energy held: :func:`friction_to_energy`).
@@ -139,7 +143,9 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     so judging it by them would keep an almost untrained one. ``main_loss`` is the main
     stage's (``build_loss(config, units, train)``), which the held stage trains with.
     ``max_seconds`` caps this stage and the held one together (``--max-minutes``, which the
-    main stage shares).
+    main stage shares). ``checkpoint(stage)``, where given, is the :class:`~metriplex.Checkpoint`
+    of the stage named ``"first-stage"`` or ``"held-stage"``; a first stage resumed from its
+    checkpoint skips the choice of initialisation (the checkpoint holds the chosen one, trained).
     """
     # The first stage keeps the hinge on negative temperatures and the wall that the main one
     # has (decided for the main stage's structure, since its energy is carried over).
@@ -149,12 +155,17 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
     init_key, key = jax.random.split(key)
     began = time.perf_counter()
     loss = build_loss(first, units, train)
-    start = _best_initialisation(first, init_key, starts=starts_for(config),
-                                 label="reversible first", train=train, valid=valid,
-                                 units=units, constant=constant, dtype=dtype, loss=loss,
-                                 max_seconds=max_seconds)
+    saved = None if checkpoint is None else checkpoint("first-stage")
+    if saved is not None and saved.resume:  # any model of the structure: its weights are read
+        start = with_dtype(build_model(first, train, key=init_key, units=units,
+                                       constant=constant), dtype)
+    else:
+        start = _best_initialisation(first, init_key, starts=starts_for(config),
+                                     label="reversible first", train=train, valid=valid,
+                                     units=units, constant=constant, dtype=dtype, loss=loss,
+                                     max_seconds=max_seconds)
     fitted, stopped = _stage(start, first, train, valid, loss=loss, units=units, dtype=dtype,
-                             key=key, progress=progress,
+                             key=key, progress=progress, checkpoint=saved,
                              max_seconds=left_of(max_seconds, began))
     print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
@@ -164,13 +175,15 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
         return model
     return friction_to_energy(model, config, train, valid, loss=main_loss, units=units,
                               dtype=dtype, key=jax.random.fold_in(key, 1), progress=progress,
-                              max_seconds=left_of(max_seconds, began))
+                              max_seconds=left_of(max_seconds, began),
+                              checkpoint=None if checkpoint is None else checkpoint("held-stage"))
 
 
 def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectories,
                        valid: Trajectories | None, *, loss: Loss, units: Units,
                        dtype: DTypeLike, key: jax.Array, progress: bool = False,
-                       max_seconds: float | None = None) -> GenericModel:
+                       max_seconds: float | None = None,
+                       checkpoint: Checkpoint | None = None) -> GenericModel:
     r"""``model`` with the rest of it (friction, and L or S where learned) trained to the
     energy of the first stage, which it holds: ``--hold-energy``, between the first stage of
     ``--reversible-first`` and the main one.
@@ -191,7 +204,8 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
     held = eqx.tree_at(lambda m: m.energy, model, Known(lambda x: energy(x)))
     began = time.perf_counter()
     fitted, stopped = _stage(held, config, train, valid, loss=loss, units=units, dtype=dtype,
-                             key=key, progress=progress, max_seconds=max_seconds)
+                             key=key, progress=progress, max_seconds=max_seconds,
+                             checkpoint=checkpoint)
     print(f"friction to the energy held: {stopped} ({time.perf_counter() - began:.0f} s)",
           file=sys.stderr)
     return eqx.tree_at(lambda m: m.energy, fitted, energy)
@@ -200,16 +214,17 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
 def before_main(model: GenericModel, config: RunConfig, train: Trajectories,
                 valid: Trajectories | None, *, units: Units, constant: tuple[int, ...],
                 given: Given, dtype: DTypeLike, model_key: jax.Array, key: jax.Array,
-                loss: Loss, progress: bool = False,
-                max_seconds: float | None = None) -> GenericModel:
+                loss: Loss, progress: bool = False, max_seconds: float | None = None,
+                checkpoint: Callable[[str], Checkpoint] | None = None) -> GenericModel:
     """The model the main stage starts from: ``model`` (built from ``model_key``) after the
     first stage where ``--reversible-first`` is on (which tries ``--starts`` initialisations
-    itself), else the best of ``--starts`` initialisations of the whole model, each tried
-    with the main stage's ``loss``."""
+    itself, and keeps ``checkpoint(stage)``: :func:`reversible_first`), else the best of
+    ``--starts`` initialisations of the whole model, each tried with the main stage's
+    ``loss`` (short trainings, not checkpointed: a resumed run tries them again)."""
     if reversible_first_on(config):
         return reversible_first(model, config, train, valid, units=units, constant=constant,
                                 dtype=dtype, key=key, main_loss=loss, progress=progress,
-                                max_seconds=max_seconds)
+                                max_seconds=max_seconds, checkpoint=checkpoint)
     starts = starts_for(config)
     if starts <= 1:
         return model

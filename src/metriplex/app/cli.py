@@ -375,19 +375,18 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _what_is_kept(args: argparse.Namespace) -> str:
-    """What an interrupted ``train`` leaves: a checkpoint to resume from, or nothing (the
-    first stages, before the main training, are not checkpointed)."""
+    """What an interrupted ``train`` leaves: a checkpoint to resume from, or nothing (before
+    the first checkpoint of its first stage)."""
     if args.command != "train" or not getattr(args, "out", None):
         return ""
     from pathlib import Path
 
-    from ._repeats import checkpoint_path
+    from ._repeats import left_checkpoint
 
-    if checkpoint_path(Path(args.out), 0).is_file():
+    if left_checkpoint(Path(args.out), 0):
         return f"; continue with the same command and --resume ({args.out} holds a checkpoint)"
-    return (f" before its first checkpoint (the stages before the main training keep none), "
-            f"so there is nothing to resume: run the same command again with --overwrite to "
-            f"start over in {args.out}")
+    return (f" before its first checkpoint, so there is nothing to resume: run the same command "
+            f"again with --overwrite to start over in {args.out}")
 
 
 if __name__ == "__main__":

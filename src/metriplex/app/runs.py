@@ -26,7 +26,8 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      residual_metric_of, stopping_for, units_for)
-from ._repeats import Training, checkpoint_path, repeats_for, train_repeats
+from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
+                       train_repeats)
 from ._report import report_figures
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
@@ -54,11 +55,11 @@ def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool =
     check_output_folder(out)
     check_not_in_use(out)
     if resume:
-        if not checkpoint_path(out, 0).is_file():
+        if not left_checkpoint(out, 0):
             raise MetriplexError(
-                f"cannot resume: {str(out)!r} holds no checkpoint.ckpt (a run interrupted "
-                "before its first checkpoint keeps none). Start it again with --overwrite "
-                "instead of --resume."
+                f"cannot resume: {str(out)!r} holds no checkpoint (a run interrupted before "
+                "its first checkpoint keeps none). Start it again with --overwrite instead of "
+                "--resume."
             )
         return
     if out.is_dir() and any(p.name != LOCK_NAME for p in out.iterdir()) and not overwrite:
@@ -311,6 +312,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                                          "kept_training": chosen})
     seconds = time.perf_counter() - began  # every stage and training
     keep(model, history, train_seconds=seconds)
+    if not history.stopped.startswith("interrupted"):
+        remove_stage_checkpoints(out)
     plots.save_figure(
         plots.loss_curves(history), out / "figures" / "loss",
         step=np.asarray(history.step),
