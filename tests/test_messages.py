@@ -593,3 +593,10 @@ def test_a_history_prints_as_a_summary_not_its_lists():
     text = repr(history)
     assert len(text) < 300, text  # the lists made 86 KB
     assert "5000 evaluations to step 49990" in text and "best_step=4200" in text
+
+
+def test_a_block_given_data_of_another_width_is_refused():
+    states = np.zeros((5, 4))  # four columns for a three-variable block: accepted before
+    with pytest.raises(mx.MetriplexError, match=r"data= must be states of shape \(N, 3\).*got "
+                       r"shape \(5, 4\)"):
+        mx.MLPPotential(3, data=states, key=jr.key(0))

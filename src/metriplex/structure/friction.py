@@ -65,8 +65,9 @@ class CholeskyFriction(AbstractFriction):
         if features is not None:
             features.check(n)
             if data is not None and input_stats is None:
+                data_statistics(np.asarray(data), n)  # the states' shape, checked
                 z = jax.vmap(features)(jnp.asarray(np.asarray(data)))
-                input_stats = data_statistics(np.asarray(z))
+                input_stats = data_statistics(np.asarray(z), features.size)
         self.input_stats = (
             None if input_stats is None
             else tuple(tuple(float(v) for v in part) for part in input_stats)

@@ -187,7 +187,7 @@ class LocalPotential(AbstractPotential):
                 f"LocalPotential output_scale must be finite and > 0; got {output_scale}.")
         self.lattice = lattice
         if data is not None:
-            shift, scale = lattice.pool(*data_statistics(np.asarray(data)))
+            shift, scale = lattice.pool(*data_statistics(np.asarray(data), lattice.n))
         self.shift = None if shift is None else tuple(float(v) for v in shift)
         self.scale = None if scale is None else tuple(float(v) for v in scale)
         self.output_scale = float(output_scale)

@@ -144,7 +144,7 @@ class MLPPotential(AbstractPotential):
                 import jax
 
                 z = np.asarray(jax.vmap(features)(jnp.asarray(z)))
-            shift, scale = data_statistics(z)
+            shift, scale = data_statistics(z, in_size)
         self.shift = None if shift is None else tuple(float(v) for v in shift)
         self.scale = None if scale is None else tuple(float(v) for v in scale)
         hkey, okey, qkey = jr.split(key, 3)
