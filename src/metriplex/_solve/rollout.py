@@ -12,7 +12,7 @@ import numpy as np
 
 from .._precision import in_full_precision
 from .._errors import MetriplexError, RolloutFailure, expect_integer
-from .._model import AbstractModel
+from .._model import AbstractModel, float_dtype
 from .._types import Array, Float, Int
 from ._scheme import AbstractScheme
 from ._implicit import AbstractImplicitScheme
@@ -283,13 +283,11 @@ def _state_dtype(model, x0) -> np.dtype:
     """The dtype a rollout runs in: ``x0``'s, raised to the model's weights' where those are
     wider (float32 states of a float64 model), and the weights' (else JAX's default float)
     for integer states."""
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
-    own = leaves[0].dtype if leaves else None
-    if not jnp.issubdtype(x0.dtype, jnp.floating):
-        return own if own is not None else jnp.zeros(()).dtype
-    if own is not None and jnp.finfo(own).bits > jnp.finfo(x0.dtype).bits:
-        return own
-    return x0.dtype
+    floating = jnp.issubdtype(x0.dtype, jnp.floating)
+    own = float_dtype(model, default=x0.dtype if floating else None)
+    if floating and jnp.finfo(own).bits <= jnp.finfo(x0.dtype).bits:
+        return x0.dtype
+    return own
 
 
 def _from_start(ts, dtype) -> jax.Array:
