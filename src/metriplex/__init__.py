@@ -1,6 +1,31 @@
 r"""metriplex: learn thermodynamically consistent (GENERIC) dynamics from trajectories.
 
 .. math:: \dot x = L(x)\nabla E(x) + M(x)\nabla S(x),\quad L\nabla S = 0,\ M\nabla E = 0.
+
+An energy E and an entropy S (scalar potentials), a Poisson bivector L (antisymmetric) and a
+friction matrix M (symmetric positive semi-definite), each learned or given, make a
+:class:`GenericModel`. Training minimises the Crank-Nicolson residual of observed pairs
+``(x_n, x_{n+1}, dt_n)`` plus penalties for the degeneracy conditions and the Jacobi identity.
+
+The data flow, one function each:
+
+- :func:`read` a data file (``.npz``, ``.csv``, ``.h5``/``.hdf5`` or ``.mat``) into
+  :class:`Trajectories` (or build them: ``Trajectories.from_list([(t, x), ...])``);
+- build the blocks: potentials (:class:`MLPPotential`, :class:`SumOf`, :class:`ZeroPotential`),
+  bivectors (:class:`SkewMLPPoisson`, :class:`CanonicalPoisson`, :class:`ConstantPoisson`, ...),
+  frictions (:class:`CholeskyFriction`, :class:`ProjectedCholeskyFriction`, ...); put every
+  network in the data's units with :class:`Units`;
+- :func:`fit` the model (a :class:`Loss` of :class:`SchemeResidual` and penalties; it keeps the
+  model whose held-out rollouts are best and returns it with its :class:`History`);
+- :func:`simulate` or :func:`solve` it from initial states (schemes :class:`CrankNicolson`,
+  :class:`ImplicitMidpoint`, :class:`DiscreteGradient`, :class:`RK4`);
+- :func:`evaluate` it on data (rollout errors, energy drift, entropy production, structure
+  residuals), and :func:`save` / :func:`load` it (JSON header + Equinox leaves).
+
+Ground-truth systems are models too (:mod:`metriplex.systems`). The command line,
+``metriplex train DATA --out RUN`` with the structure you know (``--poisson canonical:K``,
+``--entropy sum:I,J``), builds all of this with defaults chosen across many systems; see
+``metriplex --help`` and the README.
 """
 
 from ._version import __version__ as __version__
