@@ -29,9 +29,11 @@ FORMAT_VERSION = 1
 
 def save(path: str | os.PathLike, model: GenericModel, *, n: int,
          names: Sequence[str] = (), extra: dict[str, Any] | None = None) -> None:
-    """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle). ``n``: its number
-    of state variables; ``names``: none, or one string per variable; ``extra``: fields kept in
-    the header (strict JSON). Checked before anything is written, as :func:`load` checks."""
+    """Write ``model`` as a JSON header + Equinox leaves (atomic; no pickle), replacing a file
+    at ``path`` as ``numpy.save`` does (the command line refuses that without
+    ``--overwrite``). ``n``: its number of state variables; ``names``: none, or one string per
+    variable; ``extra``: fields kept in the header (strict JSON). Checked before anything is
+    written, as :func:`load` checks."""
     _check_saveable(path, model, n, names)
     header = {
         "format": "metriplex-model",
