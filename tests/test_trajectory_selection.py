@@ -87,6 +87,9 @@ def test_ids_syntax():
     assert len(huge) == 10**12
     assert list(parse_ids("1,3-4", "--trajectories").pick(np.arange(6), "data")) == [1, 3, 4]
     assert format_ids([0, 1, 2, 3, 7, 9, 10]) == "0-3,7,9-10"
+    # Negative ids, which data files may hold, are selectable, and said as they are parsed.
+    assert parse_ids("-5--3,-1-1,7", "--trajectories").ranges == ((-5, -3), (-1, 1), (7, 7))
+    assert format_ids([-5, -4, -3, -1, 0, 1]) == "-5--3,-1-1"
     assert format_ids(range(0, 40, 2)).endswith("(20 ids)")
     assert len(TrajectoryIds.of([], "x")) == 0
 
@@ -99,7 +102,8 @@ def test_ids_syntax():
         ("1,", r"got '1,', in which an empty item"),
         ("a", r"got 'a', in which 'a' is neither an id nor a range LO-HI"),
         ("2.0", r"'2\.0' is neither an id nor a range"),
-        ("-1", r"'-1' is neither .* \(ids are integers >= 0\)"),
+        ("--1", r"'--1' is neither an id nor a range"),
+        ("-2--5", r"the range '-2--5' .* runs backwards; write it from low to high \(-5--2\)"),
         ("3-", r"'3-' is neither an id nor a range"),
         ("1-2-3", r"'1-2-3' is neither"),
         ("9-5", r"the range '9-5' in '9-5' runs backwards; write it from low to high \(5-9\)"),

@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 #: How ``--trajectories`` and ``--validation-ids`` are written.
 IDS_SYNTAX = "a comma list of trajectory ids and LO-HI ranges, such as 0,3,5-9"
 
-_ID_ITEM = re.compile(r"^\s*([0-9]+)\s*(?:-\s*([0-9]+)\s*)?$")
+# An id or a range LO-HI; ids may be negative (-3, -5--2, -1-4), as the data files allow.
+_ID_ITEM = re.compile(r"^\s*(-?[0-9]+)\s*(?:-\s*(-?[0-9]+)\s*)?$")
 _ID_BOUND = 2**62
 
 
@@ -127,15 +128,14 @@ def parse_ids(text: str, option: str) -> TrajectoryIds:
         m = _ID_ITEM.match(item)
         if m is None:
             what = ("an empty item (two commas in a row, or a comma at an end)"
-                    if not item.strip() else f"{item.strip()!r} is neither an id nor a range LO-HI"
-                    + (" (ids are integers >= 0)" if item.strip().startswith("-") else ""))
+                    if not item.strip() else f"{item.strip()!r} is neither an id nor a range LO-HI")
             raise MetriplexError(f"{option} expects {IDS_SYNTAX}; got {text!r}, in which {what}.")
         lo = int(m[1])
         hi = lo if m[2] is None else int(m[2])
-        if max(lo, hi) >= _ID_BOUND:
+        if max(abs(lo), abs(hi)) >= _ID_BOUND:
             raise MetriplexError(
-                f"{option}: the id {max(lo, hi)} in {text!r} is too large (trajectory ids are "
-                f"integers below 2**62); choose ids among those of the data."
+                f"{option}: the id {max(lo, hi, key=abs)} in {text!r} is too large (trajectory "
+                f"ids are integers of magnitude below 2**62); choose ids among those of the data."
             )
         if hi < lo:
             raise MetriplexError(

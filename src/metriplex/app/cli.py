@@ -317,7 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 _OVERWRITE = "replace existing outputs (without it, existing files are never touched)"
-_IDS = "a comma list with ranges such as 0,3,5-9"
+_IDS = "a comma list with ranges such as 0,3,5-9 (negative ids with =: --trajectories=-3,-1)"
 _DT = ("give every trajectory the uniform time grid t = k*STEP (k = 0, 1, ...), for a file "
        "without times or a .mat time vector that does not fit the snapshots (a file whose own "
        "times have another step is refused)")
