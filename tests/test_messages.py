@@ -600,3 +600,15 @@ def test_a_block_given_data_of_another_width_is_refused():
     with pytest.raises(mx.MetriplexError, match=r"data= must be states of shape \(N, 3\).*got "
                        r"shape \(5, 4\)"):
         mx.MLPPotential(3, data=states, key=jr.key(0))
+
+
+def test_root_finder_tolerances_below_the_states_rounding_are_refused():
+    # Every step failed with "did not converge ... try a smaller time step" (found by the
+    # new-user check of the API); float64 states meet the same tolerances.
+    from metriplex._model import with_dtype
+
+    model, (t, x) = with_dtype(small_model(), jnp.float32), next(iter(oscillator_data()))
+    tight = mx.CrankNicolson(root_finder=mx.Newton(rtol=1e-13, atol=1e-13))
+    with pytest.raises(mx.MetriplexError, match=r"rtol=1e-13 and atol=1e-13 are below what "
+                       r"float32 states resolve \(2 machine epsilons"):
+        mx.simulate(model, jnp.asarray(x[0], jnp.float32), t[:3], scheme=tight)

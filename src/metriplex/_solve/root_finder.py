@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._errors import MetriplexError
 from .._types import State, States
 
 #: ``update(x0, x1, args)``: the step's :math:`\Delta t\,\bar f(x_0, x_1)` for one state.
@@ -94,6 +95,7 @@ def _newton(update, x0, guess, args, rtol, atol, max_steps):
             x0, a = args
             return y - x0 - update(x0, y, a)
 
+        _check_attainable(rtol, atol, x.dtype)
         solver = optx.Newton(rtol=_tolerance(rtol, x.dtype), atol=_tolerance(atol, x.dtype))
         sol = optx.root_find(fn, solver, guess, (x, a), max_steps=max_steps, throw=False)
         return _outcome(sol)
@@ -109,6 +111,7 @@ def _fixed_point(update, x0, guess, args, rtol, atol, max_steps):
             x0, a = args
             return x0 + update(x0, y, a)
 
+        _check_attainable(rtol, atol, x.dtype)
         solver = _FixedPointIteration(
             rtol=_fixed_point_tolerance(rtol, x.dtype),
             atol=_fixed_point_tolerance(atol, x.dtype),
@@ -131,6 +134,19 @@ def _tolerance(value: float | None, dtype) -> float:
     if value is not None:
         return value
     return 1e-11 if jnp.dtype(dtype) == jnp.float64 else 1e-4
+
+
+def _check_attainable(rtol: float | None, atol: float | None, dtype) -> None:
+    """Refuse tolerances that the states' dtype cannot meet (both given below 2 machine
+    epsilons, the rounding of a state's update): every step would fail as if it were too large
+    (``Newton(rtol=1e-13, atol=1e-13)`` on float32 states)."""
+    floor = 2 * float(jnp.finfo(dtype).eps)
+    if rtol is not None and atol is not None and max(rtol, atol) < floor:
+        raise MetriplexError(
+            f"the root finder's rtol={rtol:g} and atol={atol:g} are below what "
+            f"{jnp.dtype(dtype).name} states resolve (2 machine epsilons, {floor:.1e}), so no "
+            f"step could converge; give a larger tolerance (the default is "
+            f"{_tolerance(None, dtype):g}), or states and a model in float64.")
 
 
 def _fixed_point_tolerance(value: float | None, dtype) -> float:
