@@ -322,7 +322,7 @@ def training_dtype(dtype: Any) -> np.dtype:
     if checked not in (np.dtype(np.float32), np.dtype(np.float64)):
         raise MetriplexError(
             f"fit's dtype= must be float32 or float64 (jnp.float32, jnp.float64); got "
-            f"{getattr(checked, 'name', None) or repr(dtype)}.")
+            f"{repr(dtype) if checked is None else checked.name}.")
     if checked == np.float64 and not jax.config.jax_enable_x64:
         raise MetriplexError(
             "fit's dtype=float64 needs JAX's x64 mode, which is off: call "
