@@ -1,6 +1,6 @@
 """Defaults checked on systems outside the zoo: none of them was used to choose a default.
 
-    .venv/bin/python benchmarks/outside_zoo.py                       # all six, one by one
+    .venv/bin/python benchmarks/outside_zoo.py                       # all nine, one by one
     .venv/bin/python benchmarks/outside_zoo.py --cases point-vortices --out rows.json
 
 Each case is trained as `benchmarks/zoo.py` trains a zoo case (`zoo.run_case`: the structure
@@ -25,6 +25,10 @@ error the step itself makes:
   capacities in a ring, each conducting to its two neighbours with a conductance that grows
   with temperature; minutes, entropies offset by 5; L = 0 and S = sum of the s_i given, E
   and M learned (the zoo's only other L = 0 case has two variables).
+- **two-baths**, **cart-pendulum**, **tidal-orbit** (n = 6, 4, 5; in `_outside_more.py`,
+  added after the six above were run): two coupled oscillators each heating its own bath, the
+  baths conducting (seconds, periods of 10-25 ms); a pendulum on a sliding cart (cart near
+  x = 120 m); an orbit in a softened potential (km, s) circularised by radial friction.
 
 Results: docs/zoo.md, *Outside the zoo*.
 """
@@ -52,6 +56,7 @@ from metriplex.systems._base import BoxSampling, System, analytic_model  # noqa:
 from metriplex.systems.zoo import ZooCase  # noqa: E402
 from metriplex.systems.zoo._case import case_settings  # noqa: E402
 from metriplex.systems.zoo._parts import bath_energy, bath_temperature  # noqa: E402
+from _outside_more import CartPendulum, TidalOrbit, TwoBaths  # noqa: E402
 
 
 # -- a double well whose friction heats a bath ---------------------------------------------------
@@ -337,6 +342,9 @@ CASES = {c.name: c for c in (
     ZooCase.of(ReactionHeat(), {"poisson": "zero", "entropy": "sum:3"}, time_unit="s"),
     ZooCase.of(ConductionRing(), {"poisson": "zero", "entropy": "sum:0,1,2,3,4,5,6,7"},
                time_unit="min"),
+    ZooCase.of(TwoBaths(), {"poisson": "canonical:2", "entropy": "sum:4,5"}),
+    ZooCase.of(CartPendulum(), {"poisson": "canonical:2", "entropy": "zero", "friction": "zero"}),
+    ZooCase.of(TidalOrbit(), {"poisson": "canonical:2", "entropy": "sum:4"}),
 )}
 
 

@@ -99,3 +99,44 @@ def test_the_stated_equations():
             k = c.conductance * np.sqrt(T[:, i] * T[:, j]) / c.theta0
             expected[:, i] += k * (T[:, j] - T[:, i]) / T[:, i]
     np.testing.assert_allclose(_field("conduction-ring", x), expected, rtol=1e-9, atol=1e-14)
+
+    # Two oscillators, two baths: p_i' = -k_i q_i -+ (kc d + a d^3) - g_i p_i with
+    # g_i = gamma_i theta0 / theta_i; each bath gets its friction's heat and conducts to the other.
+    x = _states("two-baths")
+    c = outside_zoo.CASES["two-baths"].system.config
+    q1, q2, p1, p2, s1, s2 = x.T
+    t1 = c.theta0 * np.exp((s1 - c.s0) / c.heat_capacities[0])
+    t2 = c.theta0 * np.exp((s2 - c.s0) / c.heat_capacities[1])
+    g1, g2 = c.friction[0] * c.theta0 / t1, c.friction[1] * c.theta0 / t2
+    d = q1 - q2
+    f = c.coupling * d + c.coupling_quartic * d**3
+    expected = np.stack([p1, p2, -c.stiffness[0] * q1 - f - g1 * p1,
+                         -c.stiffness[1] * q2 + f - g2 * p2,
+                         g1 * p1**2 / t1 + c.conductance * (t2 - t1) / t1,
+                         g2 * p2**2 / t2 + c.conductance * (t1 - t2) / t2], axis=1)
+    np.testing.assert_allclose(_field("two-baths", x), expected, rtol=1e-10, atol=1e-14)
+
+    # A pendulum on a sliding cart, from its Lagrangian: the velocities solve A(phi) v = p, the
+    # cart's momentum is conserved and p_phi' = dL/dphi = -m l sin(phi) (x' phi' + g).
+    x = _states("cart-pendulum")
+    c = outside_zoo.CASES["cart-pendulum"].system.config
+    phi, m, ell = x[:, 1], c.bob_mass, c.length
+    A = np.zeros((len(x), 2, 2))
+    A[:, 0, 0], A[:, 1, 1] = c.cart_mass + m, m * ell**2
+    A[:, 0, 1] = A[:, 1, 0] = m * ell * np.cos(phi)
+    v = np.linalg.solve(A, x[:, 2:4, None])[:, :, 0]
+    expected = np.stack([v[:, 0], v[:, 1], np.zeros(len(x)),
+                         -m * ell * np.sin(phi) * (v[:, 0] * v[:, 1] + c.gravity)], axis=1)
+    np.testing.assert_allclose(_field("cart-pendulum", x), expected, rtol=1e-10, atol=1e-13)
+
+    # An orbit circularised by radial friction: p' = -mu q / (r^2 + eps^2)^(3/2) - gamma v_r q / r
+    # with v_r = p . q / r, and s' = gamma v_r^2 / theta.
+    x = _states("tidal-orbit")
+    c = outside_zoo.CASES["tidal-orbit"].system.config
+    q, p = x[:, 0:2], x[:, 2:4]
+    r = np.linalg.norm(q, axis=1, keepdims=True)
+    vr = np.sum(p * q, axis=1, keepdims=True) / r
+    theta = c.theta0 * np.exp((x[:, 4] - c.s0) / c.heat_capacity)
+    pdot = -c.mu * q / (r**2 + c.softening**2) ** 1.5 - c.friction * vr * q / r
+    expected = np.concatenate([p, pdot, (c.friction * vr[:, 0]**2 / theta)[:, None]], axis=1)
+    np.testing.assert_allclose(_field("tidal-orbit", x), expected, rtol=1e-10, atol=1e-15)
