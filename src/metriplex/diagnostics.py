@@ -353,7 +353,9 @@ def _check_inputs(model, data, scheme, horizon) -> None:
         raise MetriplexError(
             f"scheme must be a scheme object such as metriplex.CrankNicolson(); got {scheme!r}."
         )
-    check_width(data.n, model_size(model))
+    n = model_size(model)  # None for a model of known functions only
+    if n is not None:
+        check_width(data.n, n)
     if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, Real)
                                 or not np.isfinite(horizon) or horizon <= 0):
         raise MetriplexError(f"horizon must be a time > 0 (from each trajectory's start); got "
