@@ -99,6 +99,21 @@ def _potential_gradients(model, x):
     return jax.vmap(jax.grad(model.energy))(x), jax.vmap(jax.grad(model.entropy))(x)
 
 
+def _serial_correlation(residuals: np.ndarray, trajectory: np.ndarray) -> float | None:
+    r"""The lag-one correlation of per-pair ``residuals`` ``(P, n)`` along their trajectories
+    (``trajectory``: the id of each pair, pairs of one trajectory consecutive):
+    :math:`\sum_k r_k\cdot r_{k+1} / \sum_k |r_k|^2` over neighbouring pairs, not centred (a
+    steady bias counts as correlated). Noise on the recorded states gives about -0.5 (the
+    residual differences it); what a field leaves of smooth dynamics gives nearly 1. ``None``
+    with fewer than 10 neighbouring pairs."""
+    follows = trajectory[1:] == trajectory[:-1]
+    if int(follows.sum()) < 10:
+        return None
+    a, b = residuals[:-1][follows], residuals[1:][follows]
+    power = 0.5 * float(np.sum(a * a) + np.sum(b * b))
+    return _finite(float(np.sum(a * b)) / power) if power > 0 else None
+
+
 def _finite(v) -> float | None:
     return float(v) if v is not None and np.isfinite(v) else None
 

@@ -46,8 +46,10 @@ def temperature_warnings(metrics: dict) -> list[str]:
         out.append(f"warning: the learned temperatures dE/ds_i are negative at {negative:.0%} "
                    f"of the states (least {metrics['temperature_min']:.3g}): entropy "
                    "production then feeds the motion, and rollouts beyond the data can run "
-                   "away. Give more trajectories, or check which variables are entropies "
-                   "(--entropy sum:...).")
+                   "away. Data that gain energy from outside the recorded variables (a "
+                   "drive, a negative friction) need them: such data are not GENERIC with "
+                   "this S. Otherwise give more trajectories, or check which variables are "
+                   "entropies (--entropy sum:...).")
     return out
 
 
