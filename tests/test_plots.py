@@ -123,6 +123,24 @@ def test_report_figures_of_failing_rollouts(tmp_path):
     assert np.all(np.isnan(energy[failed[3]:])) and np.all(np.isfinite(energy[:failed[3]]))
 
 
+def test_a_tiny_change_of_the_energy_is_drawn_flat_and_the_data_beside_the_rollout():
+    # An autoscaled axis made a relative change of 5e-5 fill the panel, under an offset label
+    # that overlapped the title (found by a new-user check of the verdict).
+    ts = np.linspace(0.0, 2.0, 21)
+    E = 38.93 + 2e-3 * np.floor(ts)  # steps of 2e-3 where the data's energies spread over 20
+    S = np.linspace(1.0, 1.5, 21)
+    fig = plots.energy_entropy(ts, E, S, E_data=E + 1e-4, S_data=S[::-1], spreads=(20.0, 2.0))
+    energy, entropy = fig.axes
+    lo, hi = energy.get_ylim()
+    assert hi - lo >= 0.2 - 1e-9  # at least 1% of the spread: the steps look as small as they are
+    fig.canvas.draw()
+    assert not energy.yaxis.get_offset_text().get_text()
+    labels = [line.get_label() for line in energy.get_lines()]
+    assert "learned E along the data" in labels and "learned E along the learned rollout" in labels
+    assert entropy.get_ylim()[1] - entropy.get_ylim()[0] < 1.0  # wider data: autoscaled as before
+    plt.close(fig)
+
+
 def test_a_rollout_that_fails_at_its_first_step_still_draws_on_the_whole_time_axis():
     ts = np.linspace(0.0, 2.0, 21)
     E = np.full(21, np.nan)

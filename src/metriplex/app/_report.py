@@ -54,8 +54,9 @@ def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
     """The report figure set: every trajectory's rollout error over time (failed rollouts
     marked, and counted in the title) beside the per-variable error of trajectory ``k``; for
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
-    over time, and the learned E and S along the rollout (each marks where the rollout failed,
-    if it did). Residuals are in the data's rate units (data scale / time scale).
+    over time, and the learned E and S along the rollout and along the data (each marks where
+    the rollout failed, if it did). Residuals are in the data's rate units (data scale / time
+    scale).
     ``scheme``: a scheme, or its command-line name (with ``solver``). ``rollout``: what
     :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
     reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
@@ -107,13 +108,20 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
                       t=tk[1:], residual=res, names=np.array(names))
     bar.update()
-    # NaN after a failure: the potentials stop there too
-    E, S = energy_entropy_along(model, pred)
+    # Along every rollout and every observed trajectory at once (one program to compile): the
+    # report's trajectory, and the potentials' spread over the data for the axes. NaN after a
+    # failure: the potentials stop there too.
+    E_all, S_all = energy_entropy_along(model, np.stack([all_pred, xs]))
+    E, S, E_data, S_data = E_all[0, k, :T], S_all[0, k, :T], E_all[1, k, :T], S_all[1, k, :T]
+    spreads = tuple(float(np.ptp(v[1][np.isfinite(v[1])])) if np.isfinite(v[1]).any() else None
+                    for v in (E_all, S_all))
     fitted = {name: v for name, v in (("energy_true_fitted", truth.energy),
                                       ("entropy_true_fitted", truth.entropy)) if v is not None}
     plots.save_figure(plots.energy_entropy(ts, E, S, E_true=truth.energy, S_true=truth.entropy,
+                                           E_data=E_data, S_data=S_data, spreads=spreads,
                                            failed_at=failed_at),
-                      folder / "energy_entropy", t=ts, energy=E, entropy=S, **fitted)
+                      folder / "energy_entropy", t=ts, energy=E, entropy=S,
+                      energy_along_data=E_data, entropy_along_data=S_data, **fitted)
     bar.update()
 
 

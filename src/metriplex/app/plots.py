@@ -197,31 +197,58 @@ def positions(pred: np.ndarray, obs: np.ndarray, ax: Axes | None = None, *,
     return fig
 
 
+#: The least span of the energy and entropy axes, a fraction of each potential's spread over
+#: the data (autoscaled, a relative change of 5e-5 filled the panel and read as a violation).
+LEAST_SPAN = 1e-2
+
+
 def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
                    E_true: np.ndarray | None = None, S_true: np.ndarray | None = None,
+                   E_data: np.ndarray | None = None, S_data: np.ndarray | None = None,
+                   spreads: tuple[float, float] | None = None,
                    failed_at: float | None = None) -> Figure:
-    """Energy and entropy along a rollout (learned potentials; true ones if known).
-
-    ``failed_at``: the time at which the rollout failed; the potentials stop there."""
+    """Energy and entropy along a rollout (learned potentials; true ones if known) and the
+    learned ones along the observed trajectory (``E_data``, ``S_data``: for GENERIC data E
+    stays constant there and S does not decrease). ``spreads``: each potential's spread over
+    the data, of which an axis spans at least :data:`LEAST_SPAN`. ``failed_at``: the time at
+    which the rollout failed; the potentials stop there."""
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.5), constrained_layout=True)
     E = np.where(np.isfinite(E), E, np.nan)
     S = np.where(np.isfinite(S), S, np.nan)
-    _line(a1, ts, E, color="C3", label="learned E")
-    _line(a2, ts, S, color="C0", label="learned S")
+    _line(a1, ts, E, color="C3", label="learned E along the learned rollout")
+    _line(a2, ts, S, color="C0", label="learned S along the learned rollout")
+    if E_data is not None:
+        a1.plot(ts, E_data, color="C1", ls=":", lw=1.5, label="learned E along the data")
+    if S_data is not None:
+        a2.plot(ts, S_data, color="C9", ls=":", lw=1.5, label="learned S along the data")
     if E_true is not None:
         a1.plot(ts, E_true, color="0.3", ls="--", label="true E along the true trajectory (affine fit)")
     if S_true is not None:
         a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
     suffix = "" if failed_at is None else f"\n(the rollout failed at t = {failed_at:.4g})"
-    for ax, what in ((a1, "energy E"), (a2, "entropy S")):
+    for ax, what, spread in ((a1, "energy E", None if spreads is None else spreads[0]),
+                             (a2, "entropy S", None if spreads is None else spreads[1])):
         if failed_at is not None:
             ax.axvline(failed_at, color="0.4", lw=0.8, ls=":", label="rollout failed")
         _time_limits(ax, ts)
+        _least_span(ax, spread)
+        ax.ticklabel_format(axis="y", useOffset=False)  # an offset label overlapped the title
         ax.set_xlabel("t")
         ax.set_ylabel(f"learned {what}")
-        ax.set_title(f"{what.split()[0]} along the learned rollout{suffix}")
+        ax.set_title(f"{what.split()[0]} along the learned rollout and the data{suffix}")
         ax.legend(fontsize=8)
     return fig
+
+
+def _least_span(ax: Axes, spread: float | None) -> None:
+    """Widen the y-axis about its middle to :data:`LEAST_SPAN` of ``spread``, if narrower."""
+    if spread is None or not np.isfinite(spread) or spread <= 0:
+        return
+    lo, hi = ax.get_ylim()
+    least = LEAST_SPAN * spread
+    if hi - lo < least:
+        mid = 0.5 * (lo + hi)
+        ax.set_ylim(mid - 0.5 * least, mid + 0.5 * least)
 
 
 def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | None = None,
