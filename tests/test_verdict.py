@@ -219,7 +219,7 @@ def test_what_the_reference_leaves_of_smooth_dynamics_is_no_floor():
     # as the unconstrained reference (neither can follow the stiffness in time): the residual
     # ratio passes, and the verdict said "consistent". What the reference leaves correlates
     # from pair to pair (it is dynamics, not noise), so it cannot tell now.
-    data = _stiffening_data(16, 0)
+    data = _stiffening_data(24, 0)  # the shapes of `pumped`: its compiled programs serve
     model = damped_oscillator(0.3)
     v = verdict(model, data, report=mx.evaluate(model, data, scheme=mx.RK4()),
                 reference=train_reference(data, steps=STEPS, width=16))
