@@ -58,7 +58,8 @@ class History:
     def __repr__(self) -> str:
         # A summary: the lists hold one entry per evaluation (thousands in a long run).
         last = self.step[-1] if self.step else 0
-        return (f"History({len(self.step)} evaluations to step {last}, best_step={self.best_step}, "
+        return (f"History({len(self.step)} evaluations to step {last}, "
+                f"best_step={self.best_step}, "
                 f"best_valid={self.best_valid:.4g}, best_rollout={self.best_rollout:.4g}, "
                 f"stopped={self.stopped!r}, terms={sorted(self.train)})")
 

@@ -159,7 +159,8 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
                           "" if noise_pass else ": it is dynamics that neither model has, not "
                           "noise: an input or a parameter that changes in time, a variable "
                           "missing from the data, or too few trajectories for the reference to "
-                          "generalise; a structured model that leaves as much may be missing it too"))
+                          "generalise; a structured model that leaves as much may miss it "
+                          "too"))
     noise = _reason("reference_residual_correlation", correlation, th.residual_correlation,
                     noise_pass, CANNOT_TELL, noise_note)
     return [reference, noise, compared], ratio

@@ -178,13 +178,14 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
                   keep: Callable[[GenericModel, History], None],
                   ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
-    ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only while the best so far
-    is not :attr:`Outcome.good`, the last one converged or diverged (one that a step budget
-    ended wants more steps, not another start), the wall-time ``budget`` (seconds from
-    ``began``) lasts and no training was interrupted. Returns ``(best model, its history,
-    every training's outcome, the index of the best)``. ``keep(model, history)`` saves each
-    new best before the next training, so that an interruption never loses it. A training
-    that diverges counts as a failed one; where all diverge, the last error is raised."""
+    ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
+    while the best so far is not :attr:`Outcome.good`, the last one converged or diverged (one
+    that a step budget ended wants more steps, not another start), the wall-time ``budget``
+    (seconds from ``began``) lasts and no training was interrupted. Returns ``(best model, its
+    history, every training's outcome, the index of the best)``. ``keep(model, history)``
+    saves each new best before the next training, so that an interruption never loses it. A
+    training that diverges counts as a failed one; where all diverge, the last error is
+    raised."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []

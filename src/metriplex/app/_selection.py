@@ -128,7 +128,8 @@ def parse_ids(text: str, option: str) -> TrajectoryIds:
         m = _ID_ITEM.match(item)
         if m is None:
             what = ("an empty item (two commas in a row, or a comma at an end)"
-                    if not item.strip() else f"{item.strip()!r} is neither an id nor a range LO-HI")
+                    if not item.strip()
+                    else f"{item.strip()!r} is neither an id nor a range LO-HI")
             raise MetriplexError(f"{option} expects {IDS_SYNTAX}; got {text!r}, in which {what}.")
         lo = int(m[1])
         hi = lo if m[2] is None else int(m[2])
