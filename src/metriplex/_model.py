@@ -191,10 +191,16 @@ class GenericModel(AbstractModel):
         )
 
 
+def weights(model: Any) -> list[jax.Array]:
+    """The floating-point weights of ``model`` (or of a block): its trainable leaves; none for
+    given functions, such as a ground-truth system's."""
+    return jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+
+
 def float_dtype(model: Any, default: DTypeLike | None = None) -> np.dtype:
     """The dtype of the model's floating-point weights (``default``, or JAX's default float
     type, for a model without any, such as a ground-truth system)."""
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    leaves = weights(model)
     if leaves:
         return leaves[0].dtype
     return jnp.zeros(()).dtype if default is None else jnp.dtype(default)

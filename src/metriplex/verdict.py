@@ -144,13 +144,11 @@ from __future__ import annotations
 import dataclasses
 from typing import TYPE_CHECKING, Any
 
-import equinox as eqx
-import jax
 import numpy as np
 
 from ._precision import in_full_precision
 from ._errors import MetriplexError
-from ._model import GenericModel, float_dtype
+from ._model import GenericModel, float_dtype, weights
 # The black-box reference and the measurements on the held-out pairs; BlackBoxModel, Reference
 # and train_reference are importable from here as before.
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
@@ -212,7 +210,7 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
 
 def _learned(block: Any) -> bool:
     """Whether ``block`` has trainable weights (a network, not a given function)."""
-    return bool(jax.tree_util.tree_leaves(eqx.filter(block, eqx.is_inexact_array)))
+    return bool(weights(block))
 
 
 def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:

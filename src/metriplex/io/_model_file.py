@@ -19,7 +19,7 @@ import jax.random as jr
 import numpy as np
 
 from .._errors import MetriplexError
-from .._model import GenericModel, float_dtype, with_dtype
+from .._model import GenericModel, float_dtype, weights, with_dtype
 from .._version import __version__
 from ._files import atomic_write
 
@@ -216,7 +216,7 @@ def load(path: str | os.PathLike) -> GenericModel:
 
 def _check_finite_weights(model: GenericModel, path) -> None:
     """A model with a NaN or infinite weight gives NaN everywhere: refuse it at once."""
-    leaves = jax.tree_util.tree_leaves(eqx.filter(model, eqx.is_inexact_array))
+    leaves = weights(model)
     total = sum(int(np.size(a)) for a in leaves)
     bad = sum(int(np.size(a) - np.count_nonzero(np.isfinite(np.asarray(a)))) for a in leaves)
     if bad:
