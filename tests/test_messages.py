@@ -600,6 +600,12 @@ def test_a_block_given_data_of_another_width_is_refused():
     with pytest.raises(mx.MetriplexError, match=r"data= must be states of shape \(N, 3\).*got "
                        r"shape \(5, 4\)"):
         mx.MLPPotential(3, data=states, key=jr.key(0))
+    # With features, the states are checked before the features read them.
+    from metriplex.config import FEATURES
+
+    for block in (mx.MLPPotential, mx.CholeskyFriction):
+        with pytest.raises(mx.MetriplexError, match=r"shape \(N, 10\).*got shape \(5, 4\)"):
+            block(10, features=FEATURES["pendulum"], data=states, key=jr.key(0))
 
 
 def test_root_finder_tolerances_below_the_states_rounding_are_refused():

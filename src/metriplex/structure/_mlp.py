@@ -108,15 +108,21 @@ def network_spec(kind: str, hidden: Hidden, **entries: Any) -> dict[str, Any]:
     }
 
 
+def check_states(z: np.ndarray, size: int) -> np.ndarray:
+    """``z`` as the ``(N, size)`` states of a block's ``data=``, or a clear error."""
+    z = np.asarray(z)
+    if z.ndim != 2 or z.shape[1] != size:
+        raise MetriplexError(
+            f"a block's data= must be states of shape (N, {size}), one column per input of the "
+            f"block (its n variables, or its features); got shape {z.shape}.")
+    return z
+
+
 def data_statistics(z: np.ndarray, size: int | None = None,
                     ) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Mean and scale per column (:func:`metriplex.data.state_statistics`: constant columns get
     scale 1), as the static tuples a block keeps; ``z`` must be ``(N, size)`` where given."""
-    if size is not None and (z.ndim != 2 or z.shape[1] != size):
-        raise MetriplexError(
-            f"a block's data= must be states of shape (N, {size}), one column per input of the "
-            f"block (its n variables, or its features); got shape {z.shape}.")
-    mean, scale, _ = state_statistics(z)
+    mean, scale, _ = state_statistics(z if size is None else check_states(z, size))
     return tuple(float(v) for v in mean), tuple(float(v) for v in scale)
 
 

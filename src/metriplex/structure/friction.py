@@ -15,7 +15,7 @@ import numpy as np
 
 from .._types import Matrix, State
 from ._mlp import ACTIVATION, DEPTH, WIDTH
-from ._mlp import FoldedHead, Hidden, check_variables, data_statistics
+from ._mlp import FoldedHead, Hidden, check_states, check_variables, data_statistics
 from ._mlp import folded_network, network_spec, standardise
 from ._abstract import AbstractFriction
 from ._fixed import AbstractFunctionMatrix, AbstractZeroMatrix
@@ -65,8 +65,7 @@ class CholeskyFriction(AbstractFriction):
         if features is not None:
             features.check(n)
             if data is not None and input_stats is None:
-                data_statistics(np.asarray(data), n)  # the states' shape, checked
-                z = jax.vmap(features)(jnp.asarray(np.asarray(data)))
+                z = jax.vmap(features)(jnp.asarray(check_states(data, n)))
                 input_stats = data_statistics(np.asarray(z), features.size)
         self.input_stats = (
             None if input_stats is None

@@ -15,7 +15,8 @@ import numpy as np
 
 from .._errors import MetriplexError
 from .._types import Array, Float, Scalar, State
-from ._mlp import ACTIVATION, DEPTH, WIDTH, Hidden, data_statistics, network_spec, standardise
+from ._mlp import (ACTIVATION, DEPTH, WIDTH, Hidden, check_states, data_statistics,
+                   network_spec, standardise)
 from ._abstract import AbstractPotential
 from .confinement import Confinement
 from ._registry import register
@@ -139,7 +140,7 @@ class MLPPotential(AbstractPotential):
             features.check(n)
         in_size = n if features is None else features.size
         if data is not None:
-            z = np.asarray(data)
+            z = check_states(data, n)  # the states' width, before any feature reads them
             if features is not None:
                 import jax
 
