@@ -175,3 +175,21 @@ def test_report_figures_with_fifty_variables(tmp_path):
         assert (tmp_path / f"{name}.png").is_file(), name
     with np.load(tmp_path / "error.npz") as saved:
         assert saved["error_per_variable"].shape == (16, n)
+
+
+def test_a_loss_term_that_is_exactly_zero_does_not_stretch_the_loss_axis():
+    # The temperature hinge is 0 at almost every evaluation; drawn at 1e-300, it made the axis
+    # span 1e-314 ... 1e14 and the loss's fall over six decades a flat line.
+    from metriplex._train import History
+
+    steps = list(range(0, 500, 10))
+    fall = list(np.geomspace(0.17, 7e-7, len(steps)))
+    history = History(step=steps, best_step=400,
+                      train={"residual": fall, "temperature": [3e-7] + [0.0] * (len(steps) - 1),
+                             "total": fall},
+                      valid={"residual": fall, "total": fall})
+    fig = plots.loss_curves(history)
+    _check_axes(fig)
+    lo, hi = fig.axes[0].get_ylim()
+    assert 1e-8 < lo < 7e-7 and 0.17 < hi < 1.0, (lo, hi)
+    plt.close(fig)

@@ -116,15 +116,15 @@ def _per_variable_lines(ax, ts, per_variable: dict, max_labels: int, ceiling=Non
 
 
 def loss_curves(history: History, ax: Axes | None = None) -> Figure:
-    """Training and validation loss terms against the optimiser step (log scale)."""
+    """Training and validation loss terms against the optimiser step (log scale); a term at
+    exactly zero (an untouched hinge) is not drawn there, so it cannot stretch the axis."""
     fig, ax = _axes(ax)
     steps = np.asarray(history.step)
     for name, vals in history.train.items():
-        ax.semilogy(steps, np.maximum(vals, 1e-300), label=f"train {name}",
-                    lw=2 if name == "total" else 1)
-    for name, vals in history.valid.items():
-        if name == "total":
-            ax.semilogy(steps, np.maximum(vals, 1e-300), "k--", label="validation total", lw=2)
+        ax.semilogy(steps, _positive(vals), label=f"train {name}", lw=2 if name == "total" else 1)
+    for vals in [history.valid["total"]] if "total" in history.valid else []:
+        ax.semilogy(steps, _positive(vals), "k--", label="validation total", lw=2)
+    _log_limits(ax, *[line.get_ydata() for line in ax.get_lines()])
     if history.best_step:
         ax.axvline(history.best_step, color="0.6", ls=":", label="best model")
     ax.set_xlabel("optimiser step")
