@@ -193,3 +193,28 @@ def test_a_loss_term_that_is_exactly_zero_does_not_stretch_the_loss_axis():
     lo, hi = fig.axes[0].get_ylim()
     assert 1e-8 < lo < 7e-7 and 0.17 < hi < 1.0, (lo, hi)
     plt.close(fig)
+
+
+def test_the_report_shows_the_worst_trajectory_and_names_it(tmp_path):
+    # One bad trajectory among good ones was never drawn: the figures showed the first.
+    oscillator = mx.GenericModel(mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2)),
+                                 mx.SumOf((2,)), mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    ts = np.arange(41) * 0.05
+    starts = [(1.0, 0.0), (0.5, 0.5), (0.0, 1.0), (-1.0, 0.3)]
+    xs = [np.stack([a * np.cos(ts) + b * np.sin(ts), b * np.cos(ts) - a * np.sin(ts),
+                    np.zeros_like(ts)], axis=1) for a, b in starts]
+    xs[2][1:, :2] *= 1.5  # observed trajectory 2 is not the model's
+    data = mx.Trajectories.from_list([(ts, x) for x in xs], ("q", "p", "s"))
+    report_figures(oscillator, data, tmp_path / "worst")
+    for name in ("trajectories", "error"):
+        with np.load(tmp_path / "worst" / f"{name}.npz") as saved:
+            assert int(saved["trajectory" if name == "trajectories" else "shown"]) == 2
+    # Where rollouts fail, the first to fail.
+    rng = np.random.default_rng(0)
+    data = mx.Trajectories.from_list([(ts[::2], rng.normal(size=(21, 3))) for _ in range(8)],
+                                     ("q", "p", "s"))
+    report_figures(_blow_up(0.5), data, tmp_path / "failed", scheme="rk4")
+    with np.load(tmp_path / "failed" / "error.npz") as saved:
+        failed, shown = saved["failed_step"], int(saved["shown"])
+    assert 0 < np.sum(failed >= 0) < len(failed)
+    assert failed[shown] >= 0 and failed[shown] == failed[failed >= 0].min()

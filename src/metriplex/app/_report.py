@@ -48,7 +48,8 @@ FIGURE_SUFFIXES = (".png", ".pdf", ".npz")
 
 
 def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
-                   scheme: str | AbstractScheme = "cn", k: int = 0, solver: str | None = None,
+                   scheme: str | AbstractScheme = "cn", k: int | None = None,
+                   solver: str | None = None,
                    rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
                    truth: Truth | None = None, progress: bool = False) -> None:
     """The report figure set: every trajectory's rollout error over time (failed rollouts
@@ -56,20 +57,47 @@ def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
     trajectory ``k``, its rollout against the data, the one-step residual of every observed pair
     over time, and the learned E and S along the rollout and along the data (each marks where
     the rollout failed, if it did). Residuals are in the data's rate units (data scale / time
-    scale).
+    scale). ``k``: an index into the data's trajectories; by default the worst one
+    (:func:`worst_trajectory`), so one bad trajectory among good ones is what the figures show;
+    each figure names it.
     ``scheme``: a scheme, or its command-line name (with ``solver``). ``rollout``: what
     :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
     reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
     ``progress``: a bar over the four figures (large data take a while to draw)."""
     sch = scheme_from_name(scheme, solver=solver) if isinstance(scheme, str) else scheme
     out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
+    K, worst = len(data.ids), k is None
+    k = worst_trajectory(out, xs, lengths) if worst else k
+    which = f"trajectory {data.ids[k]}" + (
+        "" if K == 1 else f", the worst of {K} rollouts" if worst else f" of {K}")
     with progress_bar(total=4, disable=not progress, desc="figures", unit="figure",
                       leave=False) as bar:
-        _draw_report(model, data, folder, sch, k, out, xs, lengths, truth or Truth(
+        _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth or Truth(
             data_label="observed"), bar)
 
 
-def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, bar) -> None:
+def worst_trajectory(out: Rollout, xs: np.ndarray, lengths: np.ndarray) -> int:
+    """The index of the worst rollout: the one that failed first, if any did, else the one
+    with the largest relative L2 error over its trajectory (``xs``, ``lengths``: the padded
+    data, as :func:`~metriplex.diagnostics.rollout_data` returns them)."""
+    failed = np.asarray(out.failed_step)
+    if np.any(failed >= 0):
+        return int(np.argmin(np.where(failed >= 0, failed, np.iinfo(np.int64).max)))
+    pred = np.asarray(out.xs, dtype=np.float64)
+    error = [np.linalg.norm(pred[j, :T] - xs[j, :T]) / max(np.linalg.norm(xs[j, :T]), 1e-300)
+             for j, T in enumerate(lengths)]
+    return int(np.nanargmax(error)) if np.isfinite(error).any() else 0
+
+
+def _named(fig, which: str):
+    """``fig`` with the trajectory it shows (``which``) at the head of its title."""
+    title = fig.get_suptitle()
+    fig.suptitle(which + ("; " + title if title else ""), fontsize=9)
+    return fig
+
+
+def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Truth,
+                 bar) -> None:
     all_ts = np.asarray(out.ts, dtype=np.float64)
     all_pred = np.asarray(out.xs, dtype=np.float64)
     failed = np.asarray(out.failed_step)
@@ -77,10 +105,11 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     ts, pred, obs = all_ts[k, :T], all_pred[k, :T], xs[k, :T]
     failed_at = float(ts[min(int(failed[k]), T - 1)]) if failed[k] >= 0 else None
     names = list(data.names)
-    plots.save_figure(plots.trajectories(ts, pred, obs, names, truth_label=truth.data_label,
-                                         failed_at=failed_at),
+    plots.save_figure(_named(plots.trajectories(ts, pred, obs, names,
+                                                truth_label=truth.data_label,
+                                                failed_at=failed_at), which),
                       folder / "trajectories", t=ts, learned=pred, names=np.array(names),
-                      failed_step=failed[k], **{truth.data_label: obs})
+                      failed_step=failed[k], trajectory=data.ids[k], **{truth.data_label: obs})
     bar.update()
     # Errors of every trajectory: NaN after a failure (never a number standing for it).
     errors = np.full(all_pred.shape[:2], np.nan)
@@ -91,12 +120,12 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     reference = ({} if truth.reference_error is None
                  else {"reference_error": truth.reference_error})
     plots.save_figure(
-        plots.rollout_errors(all_ts, errors, failed_step=failed,
-                             per_variable=dict(zip(names, per_var.T)), trajectory=k,
-                             ids=list(data.ids), reference=truth.reference_error,
-                             reference_label=truth.reference_label),
+        _named(plots.rollout_errors(all_ts, errors, failed_step=failed,
+                                    per_variable=dict(zip(names, per_var.T)), trajectory=k,
+                                    ids=list(data.ids), reference=truth.reference_error,
+                                    reference_label=truth.reference_label), which),
         folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
-        error_per_variable=per_var, names=np.array(names), **reference)
+        error_per_variable=per_var, shown=data.ids[k], names=np.array(names), **reference)
     bar.update()
     # The residual of each observed pair under the scheme, in the data's rate units d_i / tau.
     rate = scale / time_scale(data, scale)
@@ -105,7 +134,8 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
     x0, x1 = jnp.asarray(xk[:-1], dtype), jnp.asarray(xk[1:], dtype)
     dt = jnp.asarray(np.diff(tk), dtype)
     res = np.asarray(_pair_residuals(model, sch, x0, x1, dt), dtype=np.float64) / rate[None, :]
-    plots.save_figure(plots.residual_over_time(tk[1:], res, names), folder / "residual",
+    plots.save_figure(_named(plots.residual_over_time(tk[1:], res, names), which),
+                      folder / "residual",
                       t=tk[1:], residual=res, names=np.array(names))
     bar.update()
     # Along the rollout and the observed trajectory, and at every trajectory's first and last
@@ -118,9 +148,10 @@ def _draw_report(model, data, folder, sch, k, out, xs, lengths, truth: Truth, ba
                     for v in (E_all[T:], S_all[T:]))
     fitted = {name: v for name, v in (("energy_true_fitted", truth.energy),
                                       ("entropy_true_fitted", truth.entropy)) if v is not None}
-    plots.save_figure(plots.energy_entropy(ts, E, S, E_true=truth.energy, S_true=truth.entropy,
-                                           E_data=E_data, S_data=S_data, spreads=spreads,
-                                           failed_at=failed_at),
+    plots.save_figure(_named(plots.energy_entropy(ts, E, S, E_true=truth.energy,
+                                                  S_true=truth.entropy, E_data=E_data,
+                                                  S_data=S_data, spreads=spreads,
+                                                  failed_at=failed_at), which),
                       folder / "energy_entropy", t=ts, energy=E, entropy=S,
                       energy_along_data=E_data, entropy_along_data=S_data, **fitted)
     bar.update()
