@@ -19,3 +19,19 @@ def test_nothing_is_claimed_within_the_data_or_without_units():
     assert _departure(UNITS, xs, ["q", "T"]) is None
     assert _departure({}, xs * 100, ["q", "T"]) is None
     assert _departure(UNITS, xs[:0], ["q", "T"]) is None
+
+
+def test_evaluated_data_beyond_the_training_data_are_named():
+    # A test set with one trajectory far from the training data gave a confident "NOT
+    # consistent ... add the variable" and no word that the model was extrapolating there.
+    import metriplex as mx
+    from metriplex.app._warnings import training_range_warning
+
+    t = np.arange(5) * 0.1
+    near = np.stack([np.linspace(-1, 1, 5), np.full(5, 10.0)], axis=1)
+    far = near + np.array([0.0, 0.5 * 7.5])  # T at 7.5 standard deviations
+    data = mx.Trajectories.from_list([(t, near), (t, far), (t, near)], ("q", "T"))
+    (line,) = training_range_warning(UNITS, data)
+    assert "1 of 3 trajectories (1)" in line and "T at 7.5 training standard deviations" in line
+    assert training_range_warning(UNITS, data.select([0, 2])) == []
+    assert training_range_warning({}, data) == []  # an older run without units

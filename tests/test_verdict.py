@@ -175,6 +175,17 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     # It names the commonest cause: energy exchanged with something outside the data.
     assert v["statement"].endswith("add the variable that takes it (an entropy, a temperature, "
                                    "a bath's energy), if it was recorded.")
+    # Data the model was trained on (or like them) keep the answer; data that reach far from
+    # them get none: there the model extrapolates, while the reference trains on these data.
+    v_in = verdict(model, pumped, report=report, reference=reference,
+                   trained_on=mx.Units.from_data(pumped))
+    assert v_in["outcome"] == NOT_CONSISTENT and _reasons(v_in)["training_range"]["passed"]
+    d = np.std(pumped.x, axis=0)
+    elsewhere = mx.Units(tuple(np.mean(pumped.x, axis=0) + 10 * d), tuple(d))
+    v_out = verdict(model, pumped, report=report, reference=reference, trained_on=elsewhere)
+    assert v_out["outcome"] == CANNOT_TELL, v_out["statement"]
+    assert _reasons(v_out)["training_range"]["value"] > 10
+    assert "never trained on" in v_out["statement"]
     # The same model with a training that did not converge: the evidence is not sound.
     v2 = verdict(model, pumped, report=report, converged=False,
                  stopped="step budget reached (300 steps)", reference=reference)

@@ -86,6 +86,17 @@ class Units:
                 entropy_scale = 1.0 / (tau * size)
         return cls(shift, scale, tau, float(energy), float(entropy_scale))
 
+    def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
+        """How far the states ``x`` (rows) reach from these units' data: the largest
+        :math:`|x_i - c_i|/d_i` (non-finite entries left out), its row and its variable."""
+        z = np.abs((np.asarray(x, dtype=np.float64) - np.asarray(self.shift))
+                   / np.asarray(self.scale))
+        z = np.where(np.isfinite(z), z, 0.0)
+        if z.size == 0:
+            return 0.0, 0, 0
+        row, var = np.unravel_index(int(np.argmax(z)), z.shape)
+        return float(z[row, var]), int(row), int(var)
+
     @property
     def rate(self) -> np.ndarray:
         r"""Per-variable rate scale :math:`d_i/\tau`: the unit of every residual."""

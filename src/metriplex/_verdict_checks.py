@@ -93,6 +93,24 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
     return reasons
 
 
+def _range_check(data, trained_on, th) -> list[dict[str, Any]]:
+    """``training_range``, where the units of the model's training data (``trained_on``) are
+    known: do ``data`` stay where the model was trained? Beyond, its residuals say how it
+    extrapolates, while the reference trains on these very data."""
+    if trained_on is None:
+        return []
+    far, _, var = trained_on.farthest(data.x)
+    passed = far <= th.training_range
+    note = (f"the data lie within {far:.2g} standard deviations of the training data's mean"
+            if passed else
+            f"the data reach states the model was never trained on ({data.names[var]} at "
+            f"{far:.2g} training standard deviations from its training mean): there the "
+            "structured model extrapolates while the reference trains on these data, so a "
+            "worse fit is no evidence against GENERIC; evaluate on data within the training "
+            "range, or train on these")
+    return [_reason("training_range", far, th.training_range, passed, CANNOT_TELL, note)]
+
+
 def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str,
                      th, correlation: float | None = None,
                      ) -> tuple[list[dict[str, Any]], float | None]:

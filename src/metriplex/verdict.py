@@ -53,6 +53,10 @@ name                       limit          meaning
                                           its predictions belong to its scheme at the data's
                                           step, not to a vector field (cannot tell; only
                                           where the report measured it)
+``training_range``         6              the data reach more than 6 standard deviations
+                                          from the mean of the model's training data (only
+                                          with ``trained_on``): there the model
+                                          extrapolates (cannot tell)
 ``reference_residual``     0.3            the black box leaves more than 30% of the held-out
                                           rates (9% of their power) unexplained: too few
                                           trajectories to generalise from, noise, a coarse
@@ -154,11 +158,13 @@ from ._model import GenericModel, float_dtype, weights
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
-from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _residual_checks,
+from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _range_check,
+                              _residual_checks,
                               _soundness_checks, _structure_checks)
 from .data import Trajectories, state_scale, time_scale
 
 if TYPE_CHECKING:
+    from ._units import Units
     from .integrate import AbstractScheme
 
 __all__ = ["CANNOT_TELL", "CONSISTENT", "EXIT_STATUS", "NOT_CONSISTENT", "BlackBoxModel",
@@ -188,14 +194,17 @@ class Thresholds:
     negative_temperatures: float = 0.01
     reversible_share: float = 0.01
     step_sensitivity: float = 0.1
+    training_range: float = 6.0
 
 
-#: What a NOT-consistent statement adds: the commonest cause on data from a real system (a
-#: damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
-MISSING_VARIABLE = ("A system that loses energy to, or gains it from, something outside the "
-                    "data (heat in a medium, a drive) has no GENERIC model in these variables: "
-                    "add the variable that takes it (an entropy, a temperature, a bath's "
-                    "energy), if it was recorded.")
+#: What a NOT-consistent statement adds: the two common causes, a model fitted to other data
+#: (a user's test set from other parameters) and, on data from a real system, a variable
+#: missing (a damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
+MISSING_VARIABLE = ("If the model was trained on other data than these (another system, other "
+                    "parameters), train on these. Otherwise, a system that loses energy to, or "
+                    "gains it from, something outside the data (heat in a medium, a drive) has "
+                    "no GENERIC model in these variables: add the variable that takes it (an "
+                    "entropy, a temperature, a bath's energy), if it was recorded.")
 
 
 #: The checks that fail where a learned S leaves the split of the motion open, and what a
@@ -254,6 +263,7 @@ def verdict(
     validation: float = 0.2,
     seed: int = 0,
     progress: bool = False,
+    trained_on: Units | None = None,
 ) -> dict[str, Any]:
     """Whether ``data`` are consistent with the GENERIC ``model``: the verdict of the checks in
     the module docstring.
@@ -265,6 +275,8 @@ def verdict(
     ``reference``: a :func:`train_reference` of ``data`` to reuse; otherwise the black box
     trains here (``width``, ``depth``, ``steps``, ``learning_rate``, ``batch_size``) on
     ``1 - validation`` of the trajectories. Both models are scored on the rest.
+    ``trained_on``: the units of the model's training data (``Units.from_data``; a run's
+    ``config.json`` keeps them), to check that ``data`` stay where the model was trained.
 
     Returns a JSON-able dict: ``outcome`` ("consistent" | "not consistent" | "cannot tell"),
     ``consistent`` (outcome == "consistent"), ``statement`` (one sentence naming each deciding
@@ -310,7 +322,7 @@ def verdict(
                                 held_out=len(pairs.dt) if valid is not None else 0,
                                 fraction=reference.validation)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
-    reasons += compared
+    reasons += compared + _range_check(data, trained_on, th)
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     reasons += _structure_checks(sr, report, th)
 
@@ -319,7 +331,7 @@ def verdict(
     # reference_residual_correlation only weakens a "consistent" (below, with the structure
     # checks): a structured model that leaves much more than the reference is not consistent.
     sound = {"held_out_pairs", "rollout_failures", "training_converged",
-             "reference_residual", "step_sensitivity"}
+             "reference_residual", "step_sensitivity", "training_range"}
     if any(r["name"] in sound for r in failed) or (ratio is None):
         outcome = CANNOT_TELL
     elif any(r["name"] == "residual_ratio" for r in failed):

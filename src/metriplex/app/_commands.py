@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
+from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import against_constant, structure_warnings, time_unit_warning
+from ._warnings import (against_constant, structure_warnings, time_unit_warning,
+                        trained_units, training_range_warning)
 
 if TYPE_CHECKING:
     import argparse
@@ -228,8 +230,9 @@ def cmd_rollout(args: argparse.Namespace) -> None:
 
 
 #: How far (in training standard deviations from the training mean) a rolled-out state may go
-#: before a failure is blamed on extrapolation: the training data themselves rarely exceed 4.
-FAR_FROM_DATA = 6.0
+#: before a failure is blamed on extrapolation: the training data themselves rarely exceed 4
+#: (the verdict's ``training_range``).
+FAR_FROM_DATA = Thresholds().training_range
 
 
 def _departure(units: dict, xs, names) -> dict | None:
@@ -237,18 +240,13 @@ def _departure(units: dict, xs, names) -> dict | None:
     data, in the run's data units (``config.json``'s ``units``: each variable's training mean
     and standard deviation); ``None`` when it stayed within :data:`FAR_FROM_DATA` of them or
     the run has no units (an older run)."""
-    import numpy as np
-
-    shift, scale = units.get("shift"), units.get("scale")
-    if shift is None or scale is None or len(xs) == 0:
+    trained = trained_units(units)
+    if trained is None or len(xs) == 0:
         return None
-    z = np.abs((np.asarray(xs) - np.asarray(shift)) / np.asarray(scale))
-    z = np.where(np.isfinite(z), z, 0.0)
-    step, var = np.unravel_index(int(np.argmax(z)), z.shape)
-    if not z[step, var] > FAR_FROM_DATA:
+    far, step, var = trained.farthest(xs)
+    if not far > FAR_FROM_DATA:
         return None
-    return {"variable": str(names[var]), "standard_deviations": float(z[step, var]),
-            "step": int(step)}
+    return {"variable": str(names[var]), "standard_deviations": far, "step": step}
 
 
 def _chosen_trajectories(args):
@@ -314,7 +312,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
     run = run_config(args.run)
-    for line in time_unit_warning(run.get("units") or {}, data):
+    for line in (time_unit_warning(run.get("units") or {}, data)
+                 + training_range_warning(run.get("units") or {}, data)):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
     if failed:
@@ -339,6 +338,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
             width=cfg.get("width", 64), depth=cfg.get("depth", 2),
             steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
             batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
+            trained_on=trained_units(run.get("units") or {}),
         )
         print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
     if args.out:

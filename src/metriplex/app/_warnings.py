@@ -1,8 +1,8 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
 that does not beat predicting no motion, learned temperatures that are negative, a learned
 entropy that rises far more than the data's, a learned energy that does not drive the motion,
-a learned entropy that decreases, and data whose time is in another unit than the training
-data's."""
+a learned entropy that decreases, data whose time is in another unit than the training
+data's, and data that reach where the model was never trained."""
 
 from __future__ import annotations
 
@@ -166,3 +166,30 @@ def time_unit_warning(units: dict, data: Trajectories) -> list[str]:
             f"({tau:.3g} against {float(trained):.3g} time units): is "
             "their time in the same unit (s, ms, h) as the training data's? The model's "
             "steps are taken in the training data's unit."]
+
+
+def trained_units(units: dict):
+    """config.json's ``units`` as :class:`metriplex.Units`; ``None`` for an older run."""
+    from .._units import Units
+
+    return Units(**units) if units.get("shift") is not None else None
+
+
+def training_range_warning(units: dict, data: Trajectories) -> list[str]:
+    """A warning naming the trajectories of ``data`` that reach more than the verdict's
+    ``training_range`` training standard deviations from the training data's mean (``units``:
+    config.json's): there the model extrapolates, and their errors say how, not how well it
+    learned the system."""
+    trained = trained_units(units)
+    if trained is None:
+        return []
+    far = [(tid, *trained.farthest(x)) for tid, (_, x) in zip(data.ids, data)]
+    far = [(tid, d, var) for tid, d, _, var in far if d > _LIMITS.training_range]
+    if not far:
+        return []
+    tid, d, var = max(far, key=lambda f: f[1])
+    ids = ", ".join(str(f[0]) for f in far[:10]) + (", ..." if len(far) > 10 else "")
+    return [f"warning: {len(far)} of {len(data)} trajectories ({ids}) reach states the model "
+            f"was never trained on ({data.names[var]} at {d:.3g} training standard deviations "
+            f"from its training mean, in trajectory {tid}): their rollout errors say how the "
+            "model extrapolates, not how well it learned the system."]
