@@ -57,6 +57,11 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                           metrics, 5.0, Path("run"))
     assert "not converged, allow more --steps" in line
     assert "rollout error on validation trajectories: 1.000e-02" in line
+    # A time cap is not lifted by more steps; after a first stage, its budget is what was left.
+    timed = train_summary(_history(3000, 3000, False, "time budget reached (15.2 s) at step "
+                                   "3000"), metrics, 30.0, Path("run"), first_stage=True)
+    assert "--steps" not in timed and "allow more time (--max-minutes)" in timed
+    assert "(15.2 s: what the first stage left of --max-minutes) at step 3000" in timed
     done = train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                           Path("run"))
     assert "not converged" not in done and "FAILED" not in done and "NO trained" not in done

@@ -258,4 +258,5 @@ def trainings_note(header: dict) -> str:
         "not judged" if o.get("score") is None else f"{o['score']:.3g}")
         + (f" ({o['failures']} failed)" if o.get("failures") else "") for o in trainings)
     return (f"kept training {header.get('kept_training', 0) + 1} of {len(trainings)} "
-            f"(held-out rollout errors, in units of the data's spread: {scores})")
+            f"(their held-out scores during training: the error over the rollout check's "
+            f"windows, in units of the data's spread, not the relative L2 below: {scores})")

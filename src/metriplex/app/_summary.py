@@ -23,8 +23,12 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     once (:func:`~metriplex.app._repeats.trainings_note`)."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
+    timed = ended.startswith("time budget")
+    if timed and first_stage:  # the stage's budget is what the earlier ones left of the run's
+        ended = ended.replace(" s)", " s: what the first stage left of --max-minutes)", 1)
     if not history.converged and history.best_step == last and last > 0:
-        ended += "; the best model is the last one: not converged, allow more --steps"
+        ended += ("; the best model is the last one: not converged, allow more "
+                  + ("time (--max-minutes)" if timed else "--steps"))
     # Where --repeats trained from other initialisations already, another --seed is no advice.
     reseed = "other initialisations did no better" if trainings else "try another --seed"
     if history.best_step == 0 and last > 0:
@@ -53,7 +57,8 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
         if done is not None:
             rollouts += f"; error of the {k - failed} completed: {done:.3e}"
     else:
-        rollouts = f"rollout error on {where}: {err:.3e} (relative L2, {k} trajectories"
+        rollouts = (f"rollout error on {where}: {err:.3e} (relative L2 over each whole "
+                    f"trajectory, mean of {k}")
         std = metrics.get("rollout_error_standardised_mean")
         rollouts += ")" if std is None else (f"; {std:.3e} in standard deviations about the "
                                             "data's mean, which no offset shrinks)")
