@@ -132,6 +132,12 @@ def test_evaluate_reports_the_error_of_predicting_no_motion():
     assert report["rollout_error_mean"] == pytest.approx(by_hand, rel=1e-12)
     assert report["constant_prediction_error_mean_completed"] == pytest.approx(by_hand)
     assert 0 < report["constant_prediction_error_to_horizon_mean"] < by_hand
+    assert report["trajectories_ending_before_horizon"] == 0
+    # A horizon beyond the data's end: the error is the whole length's, and the report says
+    # for how many trajectories (it gave the full-length error under the horizon's name).
+    span = max(t[-1] - t[0] for t, _ in data)
+    beyond = mx.evaluate(still, data, horizon=10 * span, step_check=False)
+    assert beyond["trajectories_ending_before_horizon"] == len(data)
 
 
 def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():

@@ -156,7 +156,8 @@ def evaluate(
 
     ``horizon`` (> 0): also report the rollout error up to ``t0 + horizon``
     (``rollout_error_to_horizon``, ``rollout_error_to_horizon_mean``; null where a trajectory
-    has no step within it).
+    has no step within it) and ``trajectories_ending_before_horizon`` (their error is that of
+    their whole length).
     ``rollout``: what :func:`rollout_data` returned for this model, data and scheme, to reuse
     (otherwise the trajectories are rolled out here, with a progress bar when ``progress``).
     ``step_check``: also report ``step_sensitivity`` (:func:`step_sensitivity`; one more
@@ -292,6 +293,9 @@ def evaluate(
     if horizon is not None:
         report["horizon"] = float(horizon)
         report["rollout_error_to_horizon"] = per_traj_h
+        # Data that end before the horizon give their whole length's error under its name.
+        report["trajectories_ending_before_horizon"] = int(sum(
+            ts[k, T - 1] - ts[k, 0] < horizon * (1 - 1e-9) for k, T in enumerate(lengths)))
         short = bool(np.any(np.isnan(per_traj_h)))
         report["rollout_error_to_horizon_mean"] = known(
             None if short else float(np.mean(per_traj_h)), "rollout_error_to_horizon_mean",

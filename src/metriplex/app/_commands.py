@@ -316,6 +316,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
                  + training_range_warning(run.get("units") or {}, data)):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
+    if metrics.get("trajectories_ending_before_horizon"):
+        print(f"warning: {metrics['trajectories_ending_before_horizon']} of {k} trajectories "
+              f"end before --horizon {args.horizon:g}: their rollout_error_to_horizon is over "
+              "their whole length, not up to the horizon.", file=sys.stderr)
     if failed:
         print(f"warning: {failed} of {k} rollouts FAILED (blew up or did not converge), so "
               "rollout_error_mean is null; the other rollout figures are over the completed "
