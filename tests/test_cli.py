@@ -111,6 +111,10 @@ def test_rollout_and_evaluate(oscillator_run, tmp_path):
     # The warning that the model does not beat predicting no motion comes exactly when so.
     worse = m["rollout_error_mean_completed"] >= m["constant_prediction_error_mean_completed"]
     assert ("NO better than predicting x(t) = x(0)" in res.stderr) == worse, res.stderr
+    # These are the run's training data: the figures are in-sample, and evaluate says so.
+    trained = len(json.loads((src / "run" / "config.json").read_text())["train_trajectories"])
+    assert m["trajectories_trained_on"] == trained > 0
+    assert f"{trained} of the {len(data)} trajectories evaluated were trained on" in res.stderr
     # The output exists now: evaluate refuses to overwrite it.
     before = digest(tmp)
     res = run("evaluate", src / "run", src / "data.npz", "--out", tmp / "metrics.json")

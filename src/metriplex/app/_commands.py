@@ -249,6 +249,19 @@ def _departure(units: dict, xs, names) -> dict | None:
     return {"variable": str(names[var]), "standard_deviations": far, "step": step}
 
 
+def _in_sample(run: dict, args, data, chosen) -> list[int]:
+    """The ids of ``data`` that the run in ``run`` (its config.json) trained on, where DATA
+    is the run's training file (its fingerprint); ``[]`` otherwise."""
+    recorded = (run.get("data") or {}).get("sha256")
+    if recorded is None:
+        return []
+    whole = data if chosen is None else _read_data(args, None)
+    if whole.fingerprint()["sha256"] != recorded:
+        return []
+    trained = set(run.get("train_trajectories") or [])
+    return [int(i) for i in data.ids if int(i) in trained]
+
+
 def _chosen_trajectories(args):
     """``--trajectories`` and ``--dt`` of rollout and evaluate, checked before any work."""
     from ._selection import parse_ids
@@ -316,6 +329,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
                  + training_range_warning(run.get("units") or {}, data)):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
+    trained = _in_sample(run, args, data, chosen)
+    if trained:
+        metrics["trajectories_trained_on"] = len(trained)
+        print(f"warning: DATA is this run's training file, and {len(trained)} of the {k} "
+              "trajectories evaluated were trained on: the errors and the verdict's comparison "
+              "are in-sample, not a test; evaluate on trajectories the run never saw (its "
+              "validation ids are in config.json).", file=sys.stderr)
     if metrics.get("trajectories_ending_before_horizon"):
         print(f"warning: {metrics['trajectories_ending_before_horizon']} of {k} trajectories "
               f"end before --horizon {args.horizon:g}: their rollout_error_to_horizon is over "
