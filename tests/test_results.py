@@ -446,3 +446,21 @@ def test_evaluate_says_on_stderr_how_many_rollouts_failed(monkeypatch, tmp_path)
     said = err.getvalue()
     assert "warning: 3 of 8 rollouts FAILED (blew up or did not converge)" in said
     assert "NO better than predicting x(t) = x(0)" in said
+
+
+def test_a_validation_part_that_does_not_move_is_warned_about():
+    # One long trajectory of a damped system: the last fifth, which validates, has come to
+    # rest, and every held-out score (which keeps the model and stops training) was taken there.
+    import metriplex as mx
+    from metriplex.app._warnings import still_validation_warning
+
+    t = np.linspace(0.0, 300.0, 3001)
+    x = np.stack([np.exp(-0.1 * t) * np.cos(t), -np.exp(-0.1 * t) * np.sin(t),
+                  1.0 - np.exp(-0.2 * t)], axis=1)
+    single = mx.Trajectories.from_list([(t, x)], ("q", "p", "s"))
+    (line,) = still_validation_warning(*single.split(0.2))
+    assert "the only trajectory's samples from t = 240 on" in line and "barely moves" in line
+    # The first fifth of the same motion, on trajectories of their own, moves: no warning.
+    moving = mx.Trajectories.from_list([(t[:600], x[:600] * (1 + 0.1 * k)) for k in range(5)],
+                                       ("q", "p", "s"))
+    assert still_validation_warning(*moving.split(0.2)) == []

@@ -2,7 +2,8 @@
 that does not beat predicting no motion, learned temperatures that are negative, a learned
 entropy that rises far more than the data's, a learned energy that does not drive the motion,
 a learned entropy that decreases, data whose time is in another unit than the training
-data's, and data that reach where the model was never trained."""
+data's, data that reach where the model was never trained, and a validation part that does
+not move."""
 
 from __future__ import annotations
 
@@ -193,3 +194,38 @@ def training_range_warning(units: dict, data: Trajectories) -> list[str]:
             f"was never trained on ({data.names[var]} at {d:.3g} training standard deviations "
             f"from its training mean, in trajectory {tid}): their rollout errors say how the "
             "model extrapolates, not how well it learned the system."]
+
+
+#: A validation part whose every variable spreads less than this share of its spread in the
+#: training part hardly moves: the scores that keep the model and stop training say little.
+STILL_VALIDATION = 0.01
+
+
+def still_validation_warning(train: Trajectories, valid: Trajectories | None) -> list[str]:
+    """A warning where the validation part barely moves (:data:`STILL_VALIDATION`), such as
+    the last fifth of a single trajectory that has come to rest."""
+    import numpy as np
+
+    if valid is None or len(valid.t) < 2:
+        return []
+    d_train, d_valid = np.std(train.x, axis=0), np.std(valid.x, axis=0)
+    moving = d_train > 0
+    share = float(np.max(d_valid[moving] / d_train[moving])) if moving.any() else 1.0
+    if share >= STILL_VALIDATION:
+        return []
+    where = (f"the only trajectory's samples from t = {valid.t[0]:.6g} on"
+             if len(train.ids) == 1 and list(valid.ids) == list(train.ids) else
+             f"{len(valid.ids)} validation trajectories")
+    return [f"warning: the validation part ({where}) barely moves: each variable spreads at "
+            f"most {share:.2g} of its spread in the training part, so the held-out scores that "
+            "keep the model and stop training say little about the dynamics; give more "
+            "trajectories (or choose moving ones with --validation-ids)."]
+
+
+def casimir_note(free: tuple[int, ...] | None, train: Trajectories) -> list[str]:
+    """The note where S is learned of the variables a given L leaves free (``free``)."""
+    if free is None:
+        return []
+    return [f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
+            "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
+            "(--degeneracy soft learns it of every variable)"]

@@ -29,6 +29,7 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
+from ._warnings import casimir_note, still_validation_warning
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
@@ -255,10 +256,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     units = units_for(config, train, given)
     constant = constant_variables(config, train, note=sys.stderr)
     free = casimir_variables(config, given.poisson)
-    if free is not None and not resume:
-        print(f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
-              "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
-              "(--degeneracy soft learns it of every variable)", file=sys.stderr)
+    for line in [] if resume else (casimir_note(free, train)
+                                   + still_validation_warning(train, valid)):
+        print(line, file=sys.stderr)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
