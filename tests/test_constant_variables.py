@@ -158,3 +158,26 @@ def test_constant_option_names_the_rule(tmp_path):
                          value)
         assert code != 0 and "Traceback" not in err
         assert re.search(match, err), err
+
+
+def test_jitter_on_a_recorded_parameter_is_the_median_gap_between_its_values():
+    from metriplex.app._build import input_noise_of
+
+    t = np.arange(4) * 0.1
+    ks = [1.0, 1.1, 1.3, 1.4, 1.5, 1.6, 1.8, 2.0]  # gaps of 0.1 and 0.2: median 0.1
+    data = mx.Trajectories.from_list(
+        [(t, np.stack([np.cos(t) * k, np.sin(t), np.full(4, k)], axis=1)) for k in ks],
+        ("q", "p", "k"))
+    on = RunConfig(jitter_constants=True, input_noise=0.01)
+    noise = input_noise_of(on, data, (2,))
+    assert noise[:2] == (0.01, 0.01)  # the other variables keep --input-noise
+    assert noise[2] == pytest.approx(0.1 / np.std(data.x[:, 2]))
+    assert input_noise_of(RunConfig(input_noise=0.01), data, (2,)) == 0.01  # off
+    assert input_noise_of(on, data, ()) == 0.01  # nothing held constant
+    # fit takes one fraction per variable, and refuses any outside [0, 1).
+    model = mx.GenericModel(mx.MLPPotential(3, width=8, key=jr.key(0)), mx.SumOf((2,)),
+                            mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    mx.fit(model, data, steps=2, batch_size=4, validation=0.0, input_noise=noise,
+           key=jr.key(1), progress=False)
+    with pytest.raises(mx.MetriplexError, match=r"input_noise must be in \[0, 1\)"):
+        mx.fit(model, data, steps=2, input_noise=(0.0, 0.0, 1.5), key=jr.key(1), progress=False)

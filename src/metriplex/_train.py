@@ -278,7 +278,7 @@ class TrainState:
 
 
 def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_rate: float,
-                    patience: int | None, input_noise: float, checkpoint: Any,
+                    patience: int | None, input_noise: Any, checkpoint: Any,
                     finish: Any, average: Any = None, consecutive: int = 1) -> None:
     """Refuse :func:`~metriplex.fit` arguments out of range, naming the value received."""
     if isinstance(consecutive, bool) or not isinstance(consecutive, int) or consecutive < 1:
@@ -303,10 +303,10 @@ def check_arguments(*, steps: int, batch_size: int, eval_every: int, learning_ra
                 f"fit's {name}= must be None or {cls.__name__}(...); got {type(value).__name__} "
                 f"{value!r}. Example: {name}={example}."
             )
-    if not 0 <= input_noise < 1:
+    if not np.all((0 <= np.asarray(input_noise)) & (np.asarray(input_noise) < 1)):
         raise MetriplexError(
             f"input_noise must be in [0, 1) (a fraction of each variable's standard "
-            f"deviation); got {input_noise}."
+            f"deviation, one for all or one per variable); got {input_noise}."
         )
     if checkpoint is not None and Path(checkpoint.path).is_dir():
         raise MetriplexError(

@@ -9,7 +9,7 @@ compiled loop between validations, so Python overhead stays off the hot path.
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Sequence
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -79,7 +79,7 @@ def fit(
     checkpoint: Checkpoint | None = None,
     data_parallel: bool = False,
     finish: LBFGSFinish | None = None,
-    input_noise: float = 0.0,
+    input_noise: float | Sequence[float] = 0.0,
     consecutive: int = 1,
     key: jax.Array,
 ) -> tuple[AbstractModel, History]:
@@ -148,7 +148,8 @@ def fit(
     where the validation score improves), or ``None`` (default) for none.
 
     ``input_noise``: standard deviation of Gaussian noise added to both states of every training
-    pair, as a fraction of each variable's standard deviation (default 0: none).
+    pair, as a fraction of each variable's standard deviation: one for all variables, or one
+    per variable (default 0: none).
 
     ``consecutive``: draw each batch as ``batch_size // consecutive`` runs of that many
     consecutive pairs, so each state is evaluated once (default 1: independent pairs). Applies
@@ -192,8 +193,8 @@ def fit(
     shard = batch_sharding(data_parallel, bsz)
     full_train = PairStore.of(train_rows, scale, dtype)
     noise = None
-    if input_noise > 0:
-        noise = jnp.asarray(input_noise * state_scale(train_rows.x), dtype)
+    if np.any(np.asarray(input_noise) > 0):
+        noise = jnp.asarray(np.asarray(input_noise) * state_scale(train_rows.x), dtype)
     runs = (consecutive if consecutive > 1 and train_rows.in_runs and loss.reads_runs
             and noise is None and shard is None else 1)
     run_chunk = make_chunk(loss, optimizer, static, bsz, shard, noise, runs, jit=True)

@@ -36,7 +36,7 @@ from .config import (
     validate,
 )
 from .._rollout_loss import RolloutWindow
-from ..data import Trajectories
+from ..data import Trajectories, state_scale
 from ..losses import (
     AbstractJacobiEstimator,
     ExactJacobi,
@@ -169,6 +169,27 @@ def constant_variables(config: RunConfig, data: Trajectories, *,
     if config.constant == "none":
         return ()
     return check_constant(_indices(config.constant, data.n, "--constant"), data.n)
+
+
+def input_noise_of(config: RunConfig, data: Trajectories,
+                   constant: tuple[int, ...]) -> float | tuple[float, ...]:
+    """fit's ``input_noise``: ``--input-noise`` on every variable, and with
+    ``--jitter-constants`` on each variable held ``constant`` that takes several values across
+    the trajectories (a recorded parameter), at least the median gap between neighbouring
+    values, in units of its standard deviation: the model is known only at those values, and
+    noise across the gaps makes it vary smoothly between them rather than fit each
+    trajectory's value on its own."""
+    import numpy as np
+
+    if not config.jitter_constants or not constant:
+        return config.input_noise
+    noise = np.full(data.n, float(config.input_noise))
+    d = state_scale(data.x)
+    for i in constant:
+        values = np.unique(np.asarray([x[0, i] for _, x in data]))
+        if len(values) > 2 and d[i] > 0:
+            noise[i] = max(noise[i], min(float(np.median(np.diff(values))) / d[i], 0.5))
+    return tuple(float(v) for v in noise)
 
 
 def _constant_note(constant: tuple[int, ...], names: tuple[str, ...]) -> str:

@@ -26,7 +26,7 @@ from .._units import Units
 from ..data import Trajectories
 from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
-from ._build import Given, build_model, fit_settings
+from ._build import Given, build_model, fit_settings, input_noise_of
 from ._stages import before_main, left_of
 from .config import RunConfig
 
@@ -133,7 +133,8 @@ class Training:
                                   resume=main),
             data_parallel=config.data_parallel,
             finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
-            input_noise=config.input_noise, key=f_key, **fit_settings(config))
+            input_noise=input_noise_of(config, train, self.constant), key=f_key,
+            **fit_settings(config))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -176,6 +176,11 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--input-noise", type=float, metavar="FRACTION", help="Gaussian noise on "
                    "both states of every training pair, as a fraction of each variable's "
                    f"standard deviation (default {d.input_noise}; 0 for none)")
+    w.add_argument("--jitter-constants", action=argparse.BooleanOptionalAction, default=None,
+                   help="noise on each variable held constant that takes several values across "
+                   "the trajectories (a recorded parameter), of the median gap between them, "
+                   "so the model varies smoothly between those values (default "
+                   f"{'on' if d.jitter_constants else 'off'})")
     w.add_argument("--consecutive", type=int, metavar="K", help="draw each training batch "
                    "as runs of K consecutive pairs, so each state is evaluated once, not twice; "
                    "not with --input-noise, --data-parallel, --window-steps or "
