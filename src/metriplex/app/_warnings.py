@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 from ..verdict import Thresholds
 
 if TYPE_CHECKING:
+    from .._units import Units
     from ..data import Trajectories
 
 # The warnings fire where the verdict's structure checks fail: one limit for both.
@@ -169,7 +170,7 @@ def time_unit_warning(units: dict, data: Trajectories) -> list[str]:
             "steps are taken in the training data's unit."]
 
 
-def trained_units(units: dict):
+def trained_units(units: dict) -> Units | None:
     """config.json's ``units`` as :class:`metriplex.Units`; ``None`` for an older run."""
     from .._units import Units
 
