@@ -17,8 +17,8 @@ from .._errors import MetriplexError
 from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import (against_constant, structure_warnings, time_unit_warning,
-                        trained_units, training_range_warning)
+from ._warnings import (against_constant, outlier_warning, structure_warnings,
+                        time_unit_warning, trained_units, training_range_warning)
 
 if TYPE_CHECKING:
     import argparse
@@ -326,7 +326,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
                            solver=args.solver, progress=not args.quiet)
     run = run_config(args.run)
     for line in (time_unit_warning(run.get("units") or {}, data)
-                 + training_range_warning(run.get("units") or {}, data)):
+                 + training_range_warning(run.get("units") or {}, data)
+                 + outlier_warning(data, "evaluated data")):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
     trained = _in_sample(run, args, data, chosen)

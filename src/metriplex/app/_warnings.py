@@ -2,8 +2,8 @@
 that does not beat predicting no motion, learned temperatures that are negative, a learned
 entropy that rises far more than the data's, a learned energy that does not drive the motion,
 a learned entropy that decreases, data whose time is in another unit than the training
-data's, data that reach where the model was never trained, and a validation part that does
-not move."""
+data's, data that reach where the model was never trained, a validation part that does
+not move, and samples that jump away and back (outliers)."""
 
 from __future__ import annotations
 
@@ -230,3 +230,33 @@ def casimir_note(free: tuple[int, ...] | None, train: Trajectories) -> list[str]
     return [f"note: S is learned as a function of {', '.join(train.names[i] for i in free)} "
             "only, the variables the given L leaves free, so L grad S = 0 holds exactly "
             "(--degeneracy soft learns it of every variable)"]
+
+
+#: A sample is an outlier when its variable jumps to it and back by more than this many times
+#: both the variable's median step and the steps around the jump.
+SPIKE = 30.0
+
+
+def outlier_warning(data: Trajectories, what: str = "training data") -> list[str]:
+    """A warning naming the samples of ``data`` at which a variable jumps away and straight
+    back (by :data:`SPIKE` times its median step and the neighbouring steps): one such sample
+    in 4 500 made a model 80x worse, and nothing pointed at it."""
+    import numpy as np
+
+    found, typical = [], np.maximum(np.median(np.abs(np.diff(data.x, axis=0)), axis=0), 1e-300)
+    for tid, (t, x) in zip(data.ids, data):
+        if len(t) < 3:
+            continue
+        d = np.diff(x, axis=0)
+        big = np.abs(d) > SPIKE * typical
+        back = big[:-1] & big[1:] & (np.sign(d[:-1]) == -np.sign(d[1:]))
+        pad = np.pad(np.abs(d), ((1, 1), (0, 0)))
+        calm = np.minimum(np.abs(d[:-1]), np.abs(d[1:])) > SPIKE * np.maximum(pad[:-3], pad[3:])
+        for k, i in zip(*np.nonzero(back & calm)):
+            found.append(f"trajectory {tid} at t = {t[k + 1]:.6g} ({data.names[i]})")
+    if not found:
+        return []
+    listed = "; ".join(found[:5]) + ("; ..." if len(found) > 5 else "")
+    return [f"warning: {len(found)} sample(s) of the {what} jump away and straight back, by "
+            f"more than {SPIKE:g}x the typical step: {listed}. If they are recording errors, "
+            "remove them: one such pair can dominate the residual it is fitted by."]

@@ -29,7 +29,7 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
-from ._warnings import casimir_note, still_validation_warning
+from ._warnings import casimir_note, outlier_warning, still_validation_warning
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
@@ -256,7 +256,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     units = units_for(config, train, given)
     constant = constant_variables(config, train, note=sys.stderr)
     free = casimir_variables(config, given.poisson)
-    for line in [] if resume else (casimir_note(free, train)
+    for line in [] if resume else (casimir_note(free, train) + outlier_warning(train)
                                    + still_validation_warning(train, valid)):
         print(line, file=sys.stderr)
     # Built before anything is written: a structure the data cannot take is refused first.
