@@ -214,13 +214,14 @@ def still_validation_warning(train: Trajectories, valid: Trajectories | None) ->
     share = float(np.max(d_valid[moving] / d_train[moving])) if moving.any() else 1.0
     if share >= STILL_VALIDATION:
         return []
-    where = (f"the only trajectory's samples from t = {valid.t[0]:.6g} on"
-             if len(train.ids) == 1 and list(valid.ids) == list(train.ids) else
+    single = len(train.ids) == 1 and list(valid.ids) == list(train.ids)
+    where = (f"the only trajectory's samples from t = {valid.t[0]:.6g} on" if single else
              f"{len(valid.ids)} validation trajectories")
     return [f"warning: the validation part ({where}) barely moves: each variable spreads at "
             f"most {share:.2g} of its spread in the training part, so the held-out scores that "
             "keep the model and stop training say little about the dynamics; give more "
-            "trajectories (or choose moving ones with --validation-ids)."]
+            "trajectories" + ("." if single else " (or choose moving ones with "
+                              "--validation-ids).")]
 
 
 def casimir_note(free: tuple[int, ...] | None, train: Trajectories) -> list[str]:
