@@ -485,3 +485,19 @@ def test_a_sample_that_jumps_away_and_back_is_named():
     noisy = data.x + 0.05 * np.std(data.x, axis=0) * np.random.default_rng(0).normal(
         size=data.x.shape)
     assert outlier_warning(mx.Trajectories(data.trajectory, data.t, noisy, data.names)) == []
+
+
+@pytest.mark.parametrize("offset", [-0.5, 100.0])
+def test_the_energy_drift_does_not_depend_on_the_energy_offset(offset):
+    # A learned energy's offset is arbitrary: with E = 0 at a starting state the exact model's
+    # drift read as 85 (max |dE| / |E(x0)|), with E + 100 as 2e-6.
+    import metriplex as mx
+
+    model = mx.GenericModel(mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2) + offset),
+                            mx.SumOf((2,)), mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    ts = np.arange(41) * 0.05
+    xs = [np.stack([a * np.cos(ts), -a * np.sin(ts), np.zeros_like(ts)], axis=1)
+          for a in (1.0, 0.7, 1.3)]  # a = 1 starts at E = 0 where offset = -0.5
+    data = mx.Trajectories.from_list([(ts, x) for x in xs], ("q", "p", "s"))
+    report = mx.evaluate(model, data, scheme=mx.RK4(), step_check=False)
+    assert report["energy_relative_drift"] < 1e-6
