@@ -5,6 +5,7 @@ over them. Warnings are errors here, so every figure also renders without one.""
 import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
+import pytest
 
 import metriplex as mx
 from metriplex import plots
@@ -205,7 +206,10 @@ def test_the_report_shows_the_worst_trajectory_and_names_it(tmp_path):
                     np.zeros_like(ts)], axis=1) for a, b in starts]
     xs[2][1:, :2] *= 1.5  # observed trajectory 2 is not the model's
     data = mx.Trajectories.from_list([(ts, x) for x in xs], ("q", "p", "s"))
-    report_figures(oscillator, data, tmp_path / "worst")
+    report_figures(oscillator, data, str(tmp_path / "worst"))  # a str folder, like mx.save's
+    for k in (4, -1, 2.0):  # a position in the data, not an id; refused before any rollout
+        with pytest.raises(mx.MetriplexError, match=r"k is the position of a trajectory"):
+            report_figures(oscillator, data, tmp_path / "bad", k=k)
     for name in ("trajectories", "error"):
         with np.load(tmp_path / "worst" / f"{name}.npz") as saved:
             assert int(saved["trajectory" if name == "trajectories" else "shown"]) == 2

@@ -156,7 +156,8 @@ class FitLoop:
             raise TrainingDiverged(
                 f"training diverged at step {state.done}: the loss term(s) {bad or ['total']} "
                 f"became non-finite. The best model so far (step {history.best_step}) is "
-                "kept; lower the learning rate or the loss weights.",
+                "kept on this exception (.model, .history; metriplex train saves it); lower "
+                "the learning rate or the loss weights.",
                 model=eqx.combine(state.best_params, self.static),
                 history=history,
             )

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plots
+from .._errors import MetriplexError
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import energy_entropy_along, error_over_time, rollout_data
@@ -47,7 +48,7 @@ REPORT_FIGURES = ("trajectories", "error", "residual", "energy_entropy")
 FIGURE_SUFFIXES = (".png", ".pdf", ".npz")
 
 
-def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
+def report_figures(model: GenericModel, data: Trajectories, folder: str | Path, *,
                    scheme: str | AbstractScheme = "cn", k: int | None = None,
                    solver: str | None = None,
                    rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
@@ -64,9 +65,12 @@ def report_figures(model: GenericModel, data: Trajectories, folder: Path, *,
     :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
     reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
     ``progress``: a bar over the four figures (large data take a while to draw)."""
+    K, worst, folder = len(data.ids), k is None, Path(folder)
+    if not worst and not (isinstance(k, (int, np.integer)) and 0 <= k < K):
+        raise MetriplexError(f"report_figures' k is the position of a trajectory in the data, "
+                             f"0 to {K - 1} (not its id); got {k!r}. None: the worst rollout.")
     sch = scheme_from_name(scheme, solver=solver) if isinstance(scheme, str) else scheme
     out, xs, lengths = rollout if rollout is not None else rollout_data(model, data, scheme=sch)
-    K, worst = len(data.ids), k is None
     k = worst_trajectory(out, xs, lengths) if worst else k
     which = f"trajectory {data.ids[k]}" + (
         "" if K == 1 else f", the worst of {K} rollouts" if worst else f" of {K}")
