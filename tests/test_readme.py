@@ -28,7 +28,7 @@ def test_readme_python_example_runs(tmp_path, monkeypatch):
     scope: dict = {}
     exec(compile(code, "README.md", "exec"), scope)
     assert (tmp_path / "model.mpx").exists()
-    assert scope["pred"].shape == (61, 3)
+    assert scope["pred"].shape == (61, 3) and len(scope["test"]) == 1 and len(scope["data"]) == 5
     assert np.all(np.isfinite(np.asarray(scope["pred"])))
     assert np.isfinite(scope["report"]["rollout_error_mean"])
     history = scope["history"]

@@ -96,6 +96,16 @@ def test_exactly_generic_data_are_not_called_not_consistent_in_any_unit_of_time(
     # Every reason is a documented record; the deciding figures are finite numbers or null.
     assert all(set(r) == FIELDS for r in v_s["reasons"])
     assert not [r for r in v_s["reasons"] if r["passed"] is False]
+    # The truth has no training: a "consistent" says that how training ended was not weighed;
+    # a history that converged is weighed, and one that did not makes it "cannot tell".
+    assert "How training ended was not given (history=)" in v_s["statement"]
+    done = mx.History(step=[0, 100], best_step=100, converged=True, stopped="converged")
+    v_h = verdict(truth, data, report=report, reference=reference, history=done)
+    assert v_h["outcome"] == CONSISTENT and "not given" not in v_h["statement"]
+    capped = mx.History(step=[0, 100], best_step=100, converged=False,
+                        stopped="step budget reached (100 steps)")
+    v_c = verdict(truth, data, report=report, reference=reference, history=capped)
+    assert v_c["outcome"] == CANNOT_TELL and "step budget reached" in v_c["statement"]
 
     # Time in ms instead of s (#14: the ratio read 2.4e-5): the same verdict, figure by figure.
     c = 1e3
@@ -451,7 +461,7 @@ def test_a_failed_minimum_is_said_with_the_right_comparison():
 def test_not_consistent_names_only_the_variables_that_carry_the_excess():
     # A run whose entropy s alone the structure could not fit named "s, q, p": every variable
     # of three (found by a new-user check of the verdict).
-    from metriplex.verdict import _worst_variables
+    from metriplex._verdict_checks import _worst_variables
 
     assert _worst_variables({"q": 1.4e-5, "p": 8.7e-6, "s": 7e-3}) == ["s"]
     assert _worst_variables({"a": 1.0, "b": 0.5, "c": 0.2, "d": 0.05, "e": None}) == [

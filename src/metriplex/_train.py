@@ -38,7 +38,9 @@ if TYPE_CHECKING:
 
 @dataclasses.dataclass
 class History:
-    """Loss terms per evaluation: ``step``, ``train[name]``, ``valid[name]``, wall ``time``."""
+    """Loss terms per evaluation: ``step``, ``train[name]``, ``valid[name]``, wall ``time``.
+    ``best_valid`` is the kept model's validation loss, or its training loss where nothing
+    was held out (``valid`` is then empty)."""
 
     step: list[int] = dataclasses.field(default_factory=list)
     train: dict[str, list[float]] = dataclasses.field(default_factory=dict)

@@ -250,3 +250,34 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any],
         + (": friction carries the motion, which any flow whose entropy grows admits, so the "
            "fit does not identify E" if share < th.reversible_share else "")))
     return reasons
+
+
+def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:
+    """The variables whose excess residual (the structured model's over the reference's) is
+    at least a tenth of the largest, the largest first, at most three: those that the
+    structure cannot fit (all three of three named before, the one to blame among them)."""
+    if not excess:
+        return []
+    ranked = sorted(((v, n) for n, v in excess.items() if v is not None and v > 0),
+                    reverse=True)
+    return [n for v, n in ranked[:3] if v >= 0.1 * ranked[0][0]]
+
+
+def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None) -> list[str]:
+    """What a "not consistent" adds: the laws the observed data break under the learned E and
+    S (``observed``: :func:`~metriplex._reference._observed_laws`) and the variables the
+    structure cannot fit (``excess``: each one's excess residual)."""
+    laws = []
+    rate = observed["energy_rate_relative_median"]
+    if rate is not None and rate > 0.05:
+        laws.append(f"first law: the observed flow changes the learned energy (median "
+                    f"|dE/dt| = {rate:.2g} of its largest possible rate)")
+    falls = observed["entropy_decreasing_fraction"]
+    if falls is not None and falls > 0.1:
+        laws.append(f"second law: on {100 * falls:.0f}% of the observed pairs the learned "
+                    "entropy decreases")
+    worst = _worst_variables(excess)
+    if worst:
+        laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
+                    f"{', '.join(worst)}")
+    return laws

@@ -106,9 +106,12 @@ def fit(
     ``steps``: the most optimiser steps (default 100 000; a cap: training usually stops
     earlier, when the plateau schedule has converged).
 
-    ``validation``: fraction of trajectories held out (default 0.2; split **by trajectory**),
-    explicit validation ``Trajectories``, or ``None``/``0`` for none. The returned model is the
-    one with the best validation score (or training loss without validation).
+    ``validation``: fraction of trajectories held out (default 0.2; split **by trajectory**:
+    ``data.split(validation, seed=seed_split)``), explicit validation ``Trajectories``, or
+    ``None``/``0`` for none. The returned model is the one with the best validation score (or
+    training loss without validation). A fraction applies to ``Trajectories`` only: ``Pairs``
+    and ``(x0, x1, dt)`` have no trajectories to hold out, so every pair trains and the model
+    is chosen by its training loss (pass validation ``Trajectories`` to judge it).
 
     ``stopping``: a :class:`Plateau` (default), or ``None`` for exactly ``steps`` steps of a
     cosine schedule (``default_optimizer``), optionally ended by ``patience``.

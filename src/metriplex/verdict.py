@@ -159,11 +159,12 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _range_check,
-                              _residual_checks,
+                              _residual_checks, _violations,
                               _soundness_checks, _structure_checks)
 from .data import Trajectories, state_scale, time_scale
 
 if TYPE_CHECKING:
+    from ._train import History
     from ._units import Units
     from .integrate import AbstractScheme
 
@@ -222,17 +223,6 @@ def _learned(block: Any) -> bool:
     return bool(weights(block))
 
 
-def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:
-    """The variables whose excess residual (the structured model's over the reference's) is
-    at least a tenth of the largest, the largest first, at most three: those that the
-    structure cannot fit (all three of three named before, the one to blame among them)."""
-    if not excess:
-        return []
-    ranked = sorted(((v, n) for n, v in excess.items() if v is not None and v > 0),
-                    reverse=True)
-    return [n for v, n in ranked[:3] if v >= 0.1 * ranked[0][0]]
-
-
 @in_full_precision
 def _said(r: dict[str, Any]) -> str:
     """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
@@ -252,6 +242,7 @@ def verdict(
     report: dict[str, Any] | None = None,
     converged: bool | None = None,
     stopped: str | None = None,
+    history: History | None = None,
     scheme: AbstractScheme | None = None,
     reference: Reference | None = None,
     width: int = 64,
@@ -270,8 +261,9 @@ def verdict(
 
     ``report``: :func:`metriplex.evaluate` of ``model`` on ``data`` (computed with ``scheme``
     when not given): its rollout failures and the entropy production along its rollouts are
-    weighed. ``converged``/``stopped``: how the model's training ended
-    (:class:`metriplex.train.History`); ``None`` when unknown (e.g. a ground-truth model).
+    weighed. ``converged``/``stopped``: how the model's training ended, or ``history`` (the
+    :class:`~metriplex.train.History` that :func:`~metriplex.fit` returned) to read them from;
+    unknown when none is given (a ground-truth model), and a "consistent" then says so.
     ``reference``: a :func:`train_reference` of ``data`` to reuse; otherwise the black box
     trains here (``width``, ``depth``, ``steps``, ``learning_rate``, ``batch_size``) on
     ``1 - validation`` of the trajectories. Both models are scored on the rest.
@@ -285,6 +277,8 @@ def verdict(
     from .diagnostics import evaluate, structure_residuals
 
     th = thresholds
+    if history is not None and converged is None:
+        converged, stopped = history.converged, stopped or history.stopped
     dtype = float_dtype(model)
     if report is None:
         report = evaluate(model, data, scheme=scheme)
@@ -347,27 +341,15 @@ def verdict(
     if r_box is not None:
         excess_v = (np.mean(r_gen**2, axis=0) - np.mean(r_box**2, axis=0)) / max(signal, 1e-300)
         excess = {name: _finite(v) for name, v in zip(data.names, excess_v)}
-    laws = []
-    if outcome == NOT_CONSISTENT:
-        if observed["energy_rate_relative_median"] is not None and \
-                observed["energy_rate_relative_median"] > 0.05:
-            laws.append(f"first law: the observed flow changes the learned energy (median "
-                        f"|dE/dt| = {observed['energy_rate_relative_median']:.2g} of its "
-                        "largest possible rate)")
-        if observed["entropy_decreasing_fraction"] is not None and \
-                observed["entropy_decreasing_fraction"] > 0.1:
-            laws.append(f"second law: on {100 * observed['entropy_decreasing_fraction']:.0f}% "
-                        "of the observed pairs the learned entropy decreases")
-        worst = _worst_variables(excess)
-        if worst:
-            laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
-                        f"{', '.join(worst)}")
+    laws = _violations(observed, excess) if outcome == NOT_CONSISTENT else []
 
     if outcome == CONSISTENT:
         key = [r for r in reasons if r["name"] == "residual_ratio"][0]
         statement = (f"consistent with GENERIC: {_said(key)}; the fitted model is GENERIC and "
                      f"its rollouts complete (all {sum(r['passed'] is True for r in reasons)} "
-                     "applicable checks pass; see verdict.reasons).")
+                     "applicable checks pass; see verdict.reasons)." + (
+                         "" if converged is not None else " How training ended was not given "
+                         "(history=): a model still improving would be 'cannot tell'."))
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
