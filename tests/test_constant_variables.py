@@ -164,7 +164,7 @@ def test_jitter_on_a_recorded_parameter_is_the_median_gap_between_its_values():
     from metriplex.app._build import input_noise_of
 
     t = np.arange(4) * 0.1
-    ks = [1.0, 1.1, 1.3, 1.4, 1.5, 1.6, 1.8, 2.0]  # gaps of 0.1 and 0.2: median 0.1
+    ks = [1.0 + 0.1 * i for i in range(21) if i not in (3, 9)]  # gaps of 0.1 and 0.2
     data = mx.Trajectories.from_list(
         [(t, np.stack([np.cos(t) * k, np.sin(t), np.full(4, k)], axis=1)) for k in ks],
         ("q", "p", "k"))
@@ -172,7 +172,11 @@ def test_jitter_on_a_recorded_parameter_is_the_median_gap_between_its_values():
     noise = input_noise_of(on, data, (2,))
     assert noise[:2] == (0.01, 0.01)  # the other variables keep --input-noise
     assert noise[2] == pytest.approx(0.1 / np.std(data.x[:, 2]))
-    assert input_noise_of(RunConfig(input_noise=0.01), data, (2,)) == 0.01  # off
+    few = data.select([0, 9, 18])  # three far-apart values: at most a quarter of a std
+    assert input_noise_of(on, few, (2,))[2] == 0.25
+    off = RunConfig(jitter_constants=False, input_noise=0.01)
+    assert input_noise_of(off, data, (2,)) == 0.01
+    assert RunConfig().jitter_constants  # on by default
     assert input_noise_of(on, data, ()) == 0.01  # nothing held constant
     # fit takes one fraction per variable, and refuses any outside [0, 1).
     model = mx.GenericModel(mx.MLPPotential(3, width=8, key=jr.key(0)), mx.SumOf((2,)),

@@ -178,7 +178,8 @@ def input_noise_of(config: RunConfig, data: Trajectories,
     the trajectories (a recorded parameter), at least the median gap between neighbouring
     values, in units of its standard deviation: the model is known only at those values, and
     noise across the gaps makes it vary smoothly between them rather than fit each
-    trajectory's value on its own."""
+    trajectory's value on its own. At most a quarter of its standard deviation: with a few
+    far-apart values, more would average their dynamics together."""
     import numpy as np
 
     if not config.jitter_constants or not constant:
@@ -188,7 +189,7 @@ def input_noise_of(config: RunConfig, data: Trajectories,
     for i in constant:
         values = np.unique(np.asarray([x[0, i] for _, x in data]))
         if len(values) > 2 and d[i] > 0:
-            noise[i] = max(noise[i], min(float(np.median(np.diff(values))) / d[i], 0.5))
+            noise[i] = max(noise[i], min(float(np.median(np.diff(values))) / d[i], 0.25))
     return tuple(float(v) for v in noise)
 
 

@@ -17,7 +17,8 @@ from typing import Any
 #: metric, the quick pendulum-temperature preset's test error went from under a fifth of the
 #: untrained model's to 0.395 against 0.946, and its slow test failed from 2026-11-29 on).
 _TUNED_WITHOUT_AVERAGE = dict(average_steps=0, reversible_first=False, w_temperature=0.0,
-                              confine=False, starts=1, repeats=1, residual_metric="diagonal")
+                              confine=False, starts=1, repeats=1, residual_metric="diagonal",
+                              jitter_constants=False)
 
 _RIGID_BODY = dict(
     energy="neural", entropy="zero", poisson="neural", friction="zero", jacobi="exact",

@@ -109,7 +109,7 @@ class RunConfig:
     data_parallel: bool = False
     lbfgs_steps: int = 0
     input_noise: float = 0.0
-    jitter_constants: bool = False
+    jitter_constants: bool = True
     consecutive: int = 1
     window_steps: int = 0
     residual_metric: str = "auto"
