@@ -325,8 +325,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
                            solver=args.solver, progress=not args.quiet)
     run = run_config(args.run)
-    for line in (time_unit_warning(run.get("units") or {}, data)
-                 + training_range_warning(run.get("units") or {}, data)
+    units = run.get("units") or {}
+    for line in (time_unit_warning(units, data) + training_range_warning(units, data)
                  + outlier_warning(data, "evaluated data")):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
@@ -363,7 +363,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
             width=cfg.get("width", 64), depth=cfg.get("depth", 2),
             steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
             batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
-            trained_on=trained_units(run.get("units") or {}),
+            trained_on=trained_units(units),
         )
         print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
     if args.out:
