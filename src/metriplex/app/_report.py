@@ -19,7 +19,7 @@ from . import plots
 from .._errors import MetriplexError
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
-from ..diagnostics import energy_entropy_along, error_over_time, rollout_data
+from ..diagnostics import _relative_error, energy_entropy_along, error_over_time, rollout_data
 from .._progress import progress_bar
 
 if TYPE_CHECKING:
@@ -88,9 +88,8 @@ def worst_trajectory(out: Rollout, xs: np.ndarray, lengths: np.ndarray) -> int:
     if np.any(failed >= 0):
         return int(np.argmin(np.where(failed >= 0, failed, np.iinfo(np.int64).max)))
     pred = np.asarray(out.xs, dtype=np.float64)
-    error = [np.linalg.norm(pred[j, :T] - xs[j, :T]) / max(np.linalg.norm(xs[j, :T]), 1e-300)
-             for j, T in enumerate(lengths)]
-    return int(np.nanargmax(error)) if np.isfinite(error).any() else 0
+    error = [_relative_error(pred[j, :T], xs[j, :T]) for j, T in enumerate(lengths)]
+    return int(np.nanargmax(error)) if not np.isnan(error).all() else 0
 
 
 def _named(fig, which: str):
