@@ -375,3 +375,32 @@ def test_save_load_round_trip(tmp_path):
     with np.load(res) as fresh:
         for name, (_, _, pred) in expected.items():
             assert np.array_equal(fresh[name], pred), name
+
+
+def test_degeneracy_exact_builds_what_it_records_for_every_learned_L():
+    # --degeneracy exact made run folders record L grad S = 0 exact for casimir3 and
+    # lie-poisson while building neither exactly and dropping the penalty (new-user audit).
+    from metriplex.app._build import build_loss, build_model
+    from metriplex.app.config import RunConfig, exact_blocks
+    from metriplex.systems import generate
+
+    data = generate("oscillator-bath", trajectories=2, steps=5, seed=0)
+    x = jnp.asarray(data.x[:4])
+    exact = RunConfig(poisson="casimir3", entropy="sum:2", degeneracy="exact")
+    assert exact_blocks(exact)[0]
+    model = build_model(exact, data, key=jr.key(0))
+    assert isinstance(model.poisson, EntropyCasimirPoisson3)
+    gS = jax.vmap(jax.grad(model.entropy))(x)
+    L = jax.vmap(model.poisson)(x, gS)
+    assert float(jnp.max(jnp.abs(jnp.einsum("bij,bj->bi", L, gS)))) < 1e-12
+    assert float(jnp.max(jnp.abs(L))) > 1e-3  # not L = 0
+    # With S = 0 there is nothing to be degenerate to: the plain casimir3, no penalty to drop.
+    assert not exact_blocks(RunConfig(poisson="casimir3", entropy="zero", degeneracy="exact"))[0]
+    with pytest.raises(mx.MetriplexError, match="--degeneracy exact .* got --poisson "
+                                                "lie-poisson. Use --degeneracy auto"):
+        build_model(RunConfig(poisson="lie-poisson", entropy="sum:2", degeneracy="exact"),
+                    data, key=jr.key(0))
+    # auto keeps the penalty for an L it does not build exactly.
+    auto = RunConfig(poisson="lie-poisson", entropy="sum:2")
+    assert not exact_blocks(auto)[0]
+    assert "PoissonDegeneracy" in repr(build_loss(auto, None, data))

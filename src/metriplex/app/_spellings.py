@@ -202,7 +202,7 @@ POISSON = {
     "canonical": Spelling("canonical:K (first K positions, next K momenta)", given=_canonical),
     "zero": Spelling("zero", given=lambda a, n: ZeroPoisson(n)),
     "casimir3": Spelling("casimir3 (n = 3, Jacobi exact)",
-                         learned=_network_poisson("casimir3", "casimir3"), check=_three),
+                         learned=_network_poisson("casimir3", "casimir3-entropy"), check=_three),
     "lie-poisson": Spelling("lie-poisson (learned, linear in the state)",
                             learned=lambda b: LiePoisson(b.n, scaling=b.scaling, key=b.key)),
     "file": Spelling("file:PATH (a constant L from .npy, .npz or .mat)",

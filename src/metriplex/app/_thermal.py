@@ -104,11 +104,17 @@ def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
 #: (``structure.ExchangeFriction``, ``structure.LocalFriction``).
 DEGENERACY_MODES = ("auto", "soft", "exact")
 
+#: The learned L that ``exact`` builds exactly degenerate: ``neural`` as ``projected-neural``,
+#: ``casimir3`` as ``casimir3-entropy`` (S its Casimir; not where S = 0, which would leave L = 0).
+#: ``lie-poisson`` has no such form: ``exact`` is refused with it.
+PROJECTABLE_POISSON = ("neural", "casimir3")
+
 
 def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
     if config.degeneracy == "exact":
-        return True, True
+        kind = option(config.poisson).kind
+        return kind == "neural" or (kind == "casimir3" and config.entropy != "zero"), True
     by_construction = option(config.friction).kind in EXACT_FRICTIONS  # in any mode
     if config.degeneracy == "soft":
         return False, by_construction

@@ -129,7 +129,7 @@ def structure_warnings(metrics: dict) -> list[str]:
         out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
                    f"states: {cause}, so this S is not an entropy of the model's flow. "
                    "Where L and S are learned, L grad S = 0 is a penalty by "
-                   "default and --degeneracy exact makes it exact (it can cost accuracy, see "
+                   "default and --degeneracy exact makes it exact with --poisson neural (it can cost accuracy, see "
                    "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
                    "default S is then learned of the variables L leaves free, where L has "
                    "such coordinates; not with --degeneracy soft)."

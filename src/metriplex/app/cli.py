@@ -90,9 +90,10 @@ def _add_structure_options(p: argparse.ArgumentParser) -> None:
                    "L and M hold constant (zero rows and columns; E and S may still depend on "
                    "them): auto (default) those constant along every training trajectory, such "
                    "as a parameter recorded with the data | none | their indices")
-    g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact when S is given, "
-                   "M grad E = 0 exact when training starts with L grad E alone, penalties "
-                   "otherwise) | soft (penalties only) | exact (L and M by construction)")
+    g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact for --poisson neural "
+                   "when S is given, M grad E = 0 exact when training starts with L grad E alone, "
+                   "penalties otherwise) | soft (penalties only) | exact (L and M by "
+                   "construction; casimir3 takes S as its Casimir; not with lie-poisson)")
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")
