@@ -29,7 +29,7 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
-from ._warnings import casimir_note, outlier_warning, still_validation_warning
+from ._data_checks import data_notes
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
@@ -254,11 +254,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model_key, fit_key = jr.split(jr.key(config.seed))
     given = Given.of(config, train.n)  # a file: L or M read once
     units = units_for(config, train, given)
-    constant = constant_variables(config, train, note=sys.stderr)
     free = casimir_variables(config, given.poisson)
-    for line in [] if resume else (casimir_note(free, train) + outlier_warning(train)
-                                   + still_validation_warning(train, valid)):
+    for line in [] if resume else data_notes(train, valid, config.entropy, free):
         print(line, file=sys.stderr)
+    constant = constant_variables(config, train, note=sys.stderr)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes

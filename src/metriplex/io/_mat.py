@@ -7,7 +7,8 @@ are MATLAB's ``size()``:
 1. *Snapshots* — the layout of the published structure-preserving-network (SPNN) datasets
    (``Z``, ``t_vec``, ``dt``, ``L``, ``M``): one array of trajectories × variables × snapshots,
    ``(K, n, T)``, or variables × snapshots ``(n, T)`` for one trajectory, named one of
-   ``Z, z, X, x, data, states``. Times come from a vector named one of
+   ``Z, z, X, x, data, states`` (stored the other way round, ``(K, T, n)`` or ``(T, n)``, it
+   is read so where its time vector's length says so). Times come from a vector named one of
    ``t_vec, tvec, t, time, times, ts`` — shared ``(T,)``/``(1, T)``/``(T, 1)`` or per trajectory
    ``(K, T)`` — or from a step named one of ``dt, Dt, DT, delta_t`` (scalar, or ``(K,)`` per
    trajectory; times are then ``0, dt, 2 dt, ...``). With both, the vector is used and the step
@@ -219,6 +220,8 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
             f"state array `{key}` in {where} is {_shape(Z)}; it must be trajectories × "
             "variables × snapshots (K×n×T), or variables × snapshots (n×T) for one trajectory."
         )
+    if _snapshots_first(scope, Z, time=time, dt=dt):
+        Z = Z.transpose(0, 2, 1)
     K, n, T = Z.shape
     t = _mat_times(scope, where, key, Z.shape, time=time, dt=dt)
     ids = np.arange(K, dtype=np.float64)
@@ -233,6 +236,25 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
             f"has {n} variables (its second dimension); give one name per variable."
         )
     return traj, t.reshape(-1), x, names
+
+
+def _snapshots_first(scope, Z, *, time, dt) -> bool:
+    """Whether ``Z`` is stored trajectories × snapshots × variables (numpy's habit), as its
+    time vector says: one that fits the second dimension and not the third (with ``dt`` or a
+    step alone nothing tells, and ``train``'s data summary warns where the snapshots are
+    fewer than the variables)."""
+    K, a, b = Z.shape
+    key = time if time is not None else next((k for k in TIME_KEYS if k in scope), None)
+    if dt is not None or a == b or key not in scope:
+        return False
+    tv = np.asarray(scope[key])
+    if tv.dtype.kind not in "iuf" or tv.size == 0:
+        return False
+
+    def fits(T):
+        return (tv.size == T and sum(s != 1 for s in tv.shape) <= 1) or tv.shape == (K, T)
+
+    return fits(a) and not fits(b)
 
 
 #: The way out when a file's times do not fit its states, in the words of both front ends.
@@ -282,17 +304,11 @@ def _mat_times(scope, where, key, shape, *, time, dt):
     elif tv.shape == (K, T):
         t = tv
     else:
-        hint = ""
-        if tv.size in (n, K * n) or (tv.ndim == 2 and tv.shape[-1] == n):
-            hint = (
-                f" Its length matches the second dimension of `{key}`: if `{key}` is stored as "
-                "trajectories × snapshots × variables, permute it to trajectories × variables "
-                "× snapshots (permute(Z, [1 3 2]) in MATLAB)."
-            )
         raise MetriplexError(
             f"time vector `{t_key}` in {where} is {_shape(tv)}; state array `{key}` "
             f"({K}×{n}×{T}) has {T} snapshots, so it must have {T} entries (shared) or be "
-            f"{K}×{T} (one row per trajectory).{hint} If the snapshots are evenly spaced, "
+            f"{K}×{T} (one row per trajectory); a vector of {n} entries would have read it as "
+            f"trajectories × snapshots × variables. If the snapshots are evenly spaced, "
             f"{DT_FIX}."
         )
     if step is not None and T > 1:

@@ -1,0 +1,140 @@
+"""What ``train`` says of its data before training: one line of what was read, and warnings
+where the data cannot be what the user meant — time and variables swapped, two recordings
+under one trajectory id, a given entropy that falls or never moves, nothing moving at all.
+Each was found read without a word (docs/design.md, *Trajectory data*); none stops training."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ._option import entropy_variables
+from ._warnings import casimir_note, outlier_warning, still_validation_warning
+
+if TYPE_CHECKING:
+    from ..data import Trajectories
+
+#: A step this many times its trajectory's median step is a gap: two recordings joined under one
+#: id, or lost samples; the pair across it is fitted like any other.
+GAP = 100.0
+
+#: A given entropy falls along a trajectory when its net change is below minus this many times
+#: the median size of its steps (noise alone does so on about 2 % of trajectories).
+FALL = 3.0
+
+
+def data_notes(train: Trajectories, valid: Trajectories | None, entropy: str,
+               free: tuple[int, ...] | None = None) -> list[str]:
+    """The summary line, every warning of this module and the data's warnings of
+    :mod:`._warnings` (outliers, a validation part that does not move), for ``train``'s data
+    (``entropy``: the ``--entropy`` option), then the note on an S learned of the variables
+    ``free`` that a given L leaves free (:func:`._warnings.casimir_note`)."""
+    parts = [train] if valid is None else [train, valid]
+    return ([data_summary(train, valid)] + swapped_axes_warning(parts) + gap_warning(parts)
+            + outlier_warning(train) + still_validation_warning(train, valid)
+            + still_data_warning(parts) + entropy_warnings(parts, entropy)
+            + casimir_note(free, train))
+
+
+def _each(parts: list[Trajectories]):
+    """(id, t, x) of every trajectory of every part (a trajectory split in time: both parts)."""
+    for part in parts:
+        yield from ((tid, t, x) for tid, (t, x) in zip(part.ids, part))
+
+
+def _names(names) -> str:
+    shown = ", ".join(names[:8])
+    return shown + (f", ... ({len(names)} in all)" if len(names) > 8 else "")
+
+
+def _span(values, unit: str = "") -> str:
+    lo, hi = float(np.min(values)), float(np.max(values))
+    return f"{lo:.4g}{unit}" if np.isclose(lo, hi, rtol=1e-6) else f"{lo:.4g} to {hi:.4g}{unit}"
+
+
+def data_summary(train: Trajectories, valid: Trajectories | None) -> str:
+    """One line: trajectories (to train / to validate), samples each, variables and time steps."""
+    k = len(train.ids)
+    parts = [train] if valid is None else [train, valid]
+    lengths = np.concatenate([p.lengths() for p in parts])
+    if valid is not None and set(valid.ids) == set(train.ids):
+        split = (f"{k} trajector{'y' if k == 1 else 'ies'} split in time "
+                 f"({_span(train.lengths())} samples to train, the last "
+                 f"{_span(valid.lengths())} to validate)")
+    else:
+        both = "" if valid is None else f" ({k} to train, {len(valid.ids)} to validate)"
+        split = f"{k + (0 if valid is None else len(valid.ids))} trajectories{both} of " \
+                f"{_span(lengths)} samples"
+    steps = np.concatenate([np.diff(t) for _, t, _ in _each(parts)])
+    return (f"data: {split}; {train.n} variables ({_names(train.names)}); time steps "
+            f"{_span(steps)}")
+
+
+def swapped_axes_warning(parts: list[Trajectories]) -> list[str]:
+    """Fewer samples per trajectory than variables: most likely an array stored with time and
+    variables swapped (a 10 x 100 x 3 array read as 100 variables of 3 samples)."""
+    most, n = max(int(np.max(p.lengths())) for p in parts), parts[0].n
+    if most >= n:
+        return []
+    return [f"warning: every trajectory has at most {most} samples but there are {n} "
+            "variables: were time and variables swapped when the array was stored? A .mat "
+            "array is read as trajectories x variables x snapshots, a .npz `x` as samples x "
+            "variables; transpose it, or give the file a time vector of the snapshots' length "
+            "(docs/design.md, *Trajectory data*)."]
+
+
+def gap_warning(parts: list[Trajectories]) -> list[str]:
+    """Steps of :data:`GAP` times their trajectory's median step."""
+    found = []
+    for tid, t, _ in _each(parts):
+        if len(t) < 3:
+            continue
+        dt = np.diff(t)
+        typical = float(np.median(dt))
+        for k in np.nonzero(dt > GAP * typical)[0] if typical > 0 else ():
+            found.append(f"trajectory {tid} from t = {t[k]:.6g} to {t[k + 1]:.6g} "
+                         f"({dt[k] / typical:.3g}x its median step {typical:.3g})")
+    if not found:
+        return []
+    listed = "; ".join(found[:4]) + ("; ..." if len(found) > 4 else "")
+    return [f"warning: {len(found)} time step(s) of more than {GAP:g}x their trajectory's median "
+            f"step: {listed}. Two recordings under one trajectory id, or lost samples? Give "
+            "each recording its own id: the pair across a gap is fitted like any other."]
+
+
+def still_data_warning(parts: list[Trajectories]) -> list[str]:
+    """No variable changes along any trajectory: there is no motion to learn."""
+    if any(np.ptp(x, axis=0).max() > 0 for _, _, x in _each(parts) if len(x) > 1):
+        return []
+    return ["warning: no variable changes along any trajectory: there is no motion to learn, "
+            "and every model predicts these data exactly. Check that the file holds the "
+            "states, not a constant."]
+
+
+def entropy_warnings(parts: list[Trajectories], entropy: str) -> list[str]:
+    """An entropy given as a sum of variables (``--entropy sum:...``) that never changes over
+    the data (then M grad S = 0: no friction can act), or that falls along most trajectories
+    (a flipped sign; GENERIC's S never decreases)."""
+    names = parts[0].names
+    idx = [i for i in entropy_variables(entropy) if 0 <= i < len(names)]
+    if not idx:
+        return []
+    what = f"--entropy {entropy} ({', '.join(names[i] for i in idx)})"
+    x = np.concatenate([p.x[:, idx] for p in parts])
+    if np.all(np.ptp(x, axis=0) == 0):
+        return [f"warning: the entropy of {what} does not change anywhere in the data, so S is "
+                "constant, M grad S = 0 and the model can have no friction. Name the entropy "
+                "variables that move (or --entropy zero for a system without dissipation)."]
+    falls, net = 0, []
+    for _, _, x in _each(parts):
+        s = x[:, idx].sum(axis=1)
+        if len(s) < 3:
+            continue
+        net.append(s[-1] - s[0])
+        falls += net[-1] < -FALL * float(np.median(np.abs(np.diff(s))))
+    if not net or falls <= len(net) / 2:
+        return []
+    return [f"warning: the entropy of {what} falls along {falls} of {len(net)} trajectories "
+            f"(net change {np.median(net):.3g}, the median), where GENERIC's S never decreases. "
+            "Is its sign flipped, or is it not an entropy? No GENERIC model fits that."]

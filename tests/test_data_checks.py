@@ -1,0 +1,92 @@
+"""What ``train`` says of its data before training (``metriplex.app._data_checks``): each
+warning fires on the mistake a new user made with their own data, and stays silent on exactly
+GENERIC data of every zoo system and on noise."""
+
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex.app._data_checks import data_notes, data_summary, entropy_warnings, gap_warning
+from metriplex.systems import generate
+from metriplex.systems.zoo import ZOO
+
+
+def _with(data, x=None, t=None):
+    return mx.Trajectories(data.trajectory, data.t if t is None else t,
+                           data.x if x is None else x, data.names)
+
+
+@pytest.fixture(scope="module")
+def bath():
+    return generate("oscillator-bath", trajectories=6, steps=60, seed=0)
+
+
+@pytest.mark.parametrize("name", sorted(ZOO))
+def test_exactly_generic_data_give_only_the_summary(name):
+    case = ZOO[name]
+    data = generate(case.system, trajectories=6, steps=40, dt=case.dt, seed=0)
+    train, valid = data.split(0.34, seed=0)
+    notes = data_notes(train, valid, case.flags.get("entropy", "neural"))
+    assert len(notes) == 1 and notes[0].startswith("data: 6 trajectories (4 to train, 2 to "
+                                                   "validate) of 41 samples;")
+
+
+def test_the_summary_says_what_was_read(bath):
+    train, valid = bath.split(0.34, seed=0)
+    line = data_summary(train, valid)
+    assert line.startswith("data: 6 trajectories (4 to train, 2 to validate) of 61 samples; 3 "
+                           "variables (q, p, s); time steps ")
+    (t, x), = [next(iter(bath))]
+    one = mx.Trajectories.from_list([(t, x)], names=bath.names)
+    assert "1 trajectory split in time (49 samples to train, the last 13 to validate)" in \
+        data_summary(*one.split(0.2))
+
+
+def test_time_and_variables_swapped_are_pointed_at(bath):
+    # A 10 x 100 x 3 array read as 100 variables of 3 samples trained without a word.
+    rng = np.random.default_rng(0)
+    swapped = mx.Trajectories.from_list([(np.arange(3) * 0.1, rng.normal(size=(3, 100)))
+                                         for _ in range(4)])
+    warning = data_notes(swapped, None, "neural")[1]
+    assert warning.startswith("warning: every trajectory has at most 3 samples but there are "
+                              "100 variables: were time and variables swapped")
+
+
+def test_two_recordings_under_one_id_are_pointed_at(bath):
+    # Two logging sessions concatenated, each numbering its runs from 0: one pair per
+    # trajectory spans 3990 time units against a median step of 0.1.
+    t = bath.t.copy()
+    first = np.flatnonzero(bath.trajectory == bath.ids[2])
+    t[first[30:]] += 1000.0
+    (line,) = gap_warning([_with(bath, t=t)])
+    assert line.startswith("warning: 1 time step(s) of more than 100x their trajectory's median")
+    assert f"trajectory {bath.ids[2]} from t = {bath.t[first[29]]:.6g} to " in line
+    # Irregular steps (up to 20x apart) are no gap.
+    rng = np.random.default_rng(1)
+    irregular = mx.Trajectories.from_list(
+        [(np.cumsum(rng.uniform(0.01, 0.2, 50)), rng.normal(size=(50, 2))) for _ in range(3)])
+    assert gap_warning([irregular]) == []
+
+
+def test_an_entropy_that_falls_or_never_moves_is_pointed_at(bath):
+    flipped = bath.x.copy()
+    flipped[:, 2] *= -1.0
+    (line,) = entropy_warnings([_with(bath, x=flipped)], "sum:2")
+    assert line.startswith("warning: the entropy of --entropy sum:2 (s) falls along 6 of 6 "
+                           "trajectories")
+    assert entropy_warnings([bath], "sum:2") == []
+    # Noise on a conserved S (no dissipation) is no fall.
+    rng = np.random.default_rng(0)
+    still = bath.x.copy()
+    still[:, 2] = 1.0 + 1e-3 * rng.normal(size=len(still))
+    assert entropy_warnings([_with(bath, x=still)], "sum:2") == []
+    constant = bath.x.copy()
+    constant[:, 2] = 9.81
+    (line,) = entropy_warnings([_with(bath, x=constant)], "sum:2")
+    assert "does not change anywhere in the data, so S is constant, M grad S = 0" in line
+
+
+def test_data_where_nothing_moves_are_pointed_at(bath):
+    frozen = _with(bath, x=np.ones_like(bath.x))
+    assert any(n.startswith("warning: no variable changes along any trajectory")
+               for n in data_notes(frozen, None, "neural"))
