@@ -30,6 +30,27 @@ def test_constant_blocks_check_their_matrices():
     assert np.asarray(M(x, x)).shape == (3, 3)
 
 
+def test_a_friction_matrix_rounded_to_six_digits_or_float32_is_taken(tmp_path):
+    # M grad E = 0 needs a null space: a rank-one M = w w^T typed to six digits, or stored in
+    # float32, has eigenvalues of -1e-8 relative, and was refused as "not PSD (M, not -M)".
+    rng = np.random.default_rng(0)
+    for k in range(5):
+        w = rng.normal(size=4)
+        exact = np.outer(w, w)
+        for given in (np.array([[float(f"{v:.6g}") for v in row] for row in exact]),
+                      exact.astype(np.float32)):
+            M = np.asarray(mx.ConstantFriction(given)(jnp.ones(4), jnp.ones(4)), np.float64)
+            # Negative rounding set to zero (what is left is float64's, not the input's 1e-8).
+            assert np.linalg.eigvalsh(M).min() >= -1e-14 * np.abs(exact).max()
+            assert np.abs(M - exact).max() < 1e-5 * np.abs(exact).max()
+    # An indefinite M is still refused, naming the file it came from.
+    np.save(tmp_path / "M.npy", np.diag([1.0, -1e-3, 0.0]))
+    with pytest.raises(mx.MetriplexError, match=r"--friction file:.*M\.npy: a friction matrix "
+                                                r"must be positive semi-definite .* -0\.001"):
+        validate(RunConfig(poisson="canonical:1", entropy="sum:2",
+                           friction=f"file:{tmp_path / 'M.npy'}"), 3)
+
+
 def test_lie_poisson_is_linear_and_antisymmetric():
     L = mx.LiePoisson(3, key=jr.key(0))
     a, b = jnp.array([1.0, -2.0, 0.5]), jnp.array([0.3, 0.1, -1.0])

@@ -122,6 +122,17 @@ def _potential(b: Learn) -> MLPPotential:
                         quadratic=b.quadratic, confinement=b.confinement, key=b.key, **b.net)
 
 
+def _from_file(cls, path: str, key: str, n: int):
+    """The constant block ``cls`` of the matrix ``key`` in the file ``path``; its refusal names
+    the file."""
+    matrix = read_matrix(path, key, n)
+    try:
+        return cls(matrix)
+    except MetriplexError as e:
+        option = "--poisson" if key == "L" else "--friction"
+        raise MetriplexError(f"{option} file:{path}: {e}") from None
+
+
 def _network_poisson(kind: str, exact_kind: str) -> Callable[[Learn], Any]:
     def make(b: Learn) -> Any:
         chosen = exact_kind if b.exact else kind
@@ -206,7 +217,7 @@ POISSON = {
     "lie-poisson": Spelling("lie-poisson (learned, linear in the state)",
                             learned=lambda b: LiePoisson(b.n, scaling=b.scaling, key=b.key)),
     "file": Spelling("file:PATH (a constant L from .npy, .npz or .mat)",
-                     given=lambda a, n: ConstantPoisson(read_matrix(a, "L", n))),
+                     given=lambda a, n: _from_file(ConstantPoisson, a, "L", n)),
 }
 FRICTION = {
     "neural": Spelling("neural (default)", learned=_friction),
@@ -218,7 +229,7 @@ FRICTION = {
                       check=_lattice_check("--friction")),
     "zero": Spelling("zero", given=lambda a, n: ZeroFriction(n)),
     "file": Spelling("file:PATH (a constant M from .npy, .npz or .mat)",
-                     given=lambda a, n: ConstantFriction(read_matrix(a, "M", n))),
+                     given=lambda a, n: _from_file(ConstantFriction, a, "M", n)),
 }
 #: The tables by option.
 SPELLINGS = {"--energy": ENERGY, "--entropy": ENTROPY, "--poisson": POISSON,

@@ -20,12 +20,17 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 
+#: The relative rounding a given constant L or M may carry: entries typed to six significant
+#: digits (5e-7 relative at worst) or stored in float32 (6e-8).
+ROUNDING = 1e-6
+
+
 @register("poisson", "constant")
 class ConstantPoisson(AbstractConstantMatrix, AbstractPoisson):
     r"""A known constant Poisson matrix :math:`L` (antisymmetric; a constant bivector always
     satisfies the Jacobi identity).
 
-    An input that is antisymmetric up to rounding (relative ``1e-8``) is made exactly
+    An input that is antisymmetric up to rounding (relative :data:`ROUNDING`) is made exactly
     antisymmetric, :math:`(L - L^\top)/2`; a larger asymmetry is an error.
 
     ```python
@@ -37,7 +42,7 @@ class ConstantPoisson(AbstractConstantMatrix, AbstractPoisson):
         a = square_matrix(matrix, "a constant Poisson matrix L")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a + a.T).max())
-        if asym > 1e-8 * size:
+        if asym > ROUNDING * size:
             raise MetriplexError(
                 f"a Poisson matrix must be antisymmetric (L = -L^T); the given L has "
                 f"max |L + L^T| = {asym:.3g} (entries up to {size:.3g}). Check that the file "
@@ -53,28 +58,31 @@ class ConstantPoisson(AbstractConstantMatrix, AbstractPoisson):
 class ConstantFriction(AbstractConstantMatrix, AbstractFriction):
     r"""A known constant friction matrix :math:`M` (symmetric positive semi-definite).
 
-    An input that is symmetric up to rounding (relative ``1e-8``) is symmetrised; a larger
-    asymmetry, or an eigenvalue below :math:`-10^{-8}\max|M|`, is an error.
+    An input that is symmetric up to rounding (relative :data:`ROUNDING`) is symmetrised, and
+    its eigenvalues below zero by no more than the rounding of its entries (:data:`ROUNDING`
+    :math:`\cdot\, n \max|M|`: a matrix typed to six digits, or stored in float32, that has
+    the null space M grad E = 0 asks for) are set to zero; a larger asymmetry or negative
+    eigenvalue is an error.
     """
 
     def __init__(self, matrix: ArrayLike) -> None:
         a = square_matrix(matrix, "a constant friction matrix M")
         size = max(float(np.abs(a).max()), 1e-300)
         asym = float(np.abs(a - a.T).max())
-        if asym > 1e-8 * size:
+        if asym > ROUNDING * size:
             raise MetriplexError(
                 f"a friction matrix must be symmetric (M = M^T); the given M has "
                 f"max |M - M^T| = {asym:.3g} (entries up to {size:.3g}). Check that the file "
                 "holds M and not L."
             )
-        sym = 0.5 * (a + a.T)
-        low = float(np.linalg.eigvalsh(sym).min())
-        if low < -1e-8 * size:
+        values, vectors = np.linalg.eigh(0.5 * (a + a.T))
+        if values.min() < -ROUNDING * a.shape[0] * size:
             raise MetriplexError(
                 f"a friction matrix must be positive semi-definite (dissipation >= 0); the given "
-                f"M has the eigenvalue {low:.3g}. Check its sign convention (M, not -M)."
+                f"M has the eigenvalue {values.min():.3g} (entries up to {size:.3g}), beyond "
+                f"the rounding of its entries. Check its sign convention (M, not -M)."
             )
-        self.matrix = frozen(sym)
+        self.matrix = frozen((vectors * np.maximum(values, 0.0)) @ vectors.T)
         self.n = a.shape[0]
 
     uses_gradient: ClassVar[bool] = False
