@@ -424,6 +424,7 @@ def test_evaluate_says_on_stderr_how_many_rollouts_failed(monkeypatch, tmp_path)
 
     import metriplex as mx
     import metriplex.app.runs as runs
+    import metriplex.app._data_checks as _data_checks
     from metriplex.cli import main
 
     data = tmp_path / "d.npz"
@@ -439,7 +440,7 @@ def test_evaluate_says_on_stderr_how_many_rollouts_failed(monkeypatch, tmp_path)
                "rollout_error_mean_completed": 1.43,
                "constant_prediction_error_mean_completed": 1.415}
     monkeypatch.setattr(runs, "evaluate_run", lambda *a, **k: dict(metrics))
-    monkeypatch.setattr(runs, "check_names", lambda *a, **k: None)
+    monkeypatch.setattr(_data_checks, "check_names", lambda *a, **k: None)
     err = io.StringIO()
     with redirect_stderr(err), redirect_stdout(io.StringIO()):
         main(["evaluate", str(tmp_path / "run"), str(data), "--no-verdict", "--quiet"])
@@ -501,3 +502,22 @@ def test_the_energy_drift_does_not_depend_on_the_energy_offset(offset):
     data = mx.Trajectories.from_list([(ts, x) for x in xs], ("q", "p", "s"))
     report = mx.evaluate(model, data, scheme=mx.RK4(), step_check=False)
     assert report["energy_relative_drift"] < 1e-6
+
+
+def test_training_data_written_again_are_told_in_sample():
+    # evaluate compared the whole file's hash: the training data exported with 8 digits, or
+    # with a test trajectory added, read as a test.
+    import metriplex as mx
+    from metriplex.app.config import RunConfig
+    from metriplex.app._warnings import trained_on
+    from metriplex.app.runs import RunData
+    from metriplex.systems import generate
+
+    data = generate("oscillator-bath", trajectories=6, steps=20, seed=0)
+    parts = RunData.of(data, RunConfig(validation=0.34))
+    run = {"data": parts.info}
+    rounded = mx.Trajectories(data.trajectory, data.t,
+                              np.array([[float(f"{v:.8g}") for v in row] for row in data.x]),
+                              data.names)
+    assert trained_on(run, rounded) == sorted(int(i) for i in parts.train.ids)
+    assert trained_on(run, generate("oscillator-bath", trajectories=6, steps=20, seed=1)) == []

@@ -17,8 +17,8 @@ from .._errors import MetriplexError
 from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import (against_constant, outlier_warning, structure_warnings,
-                        time_unit_warning, trained_units, training_range_warning)
+from ._warnings import (against_constant, in_sample_warning, outlier_warning, structure_warnings,
+                        time_unit_warning, trained_on, trained_units, training_range_warning)
 
 if TYPE_CHECKING:
     import argparse
@@ -169,7 +169,8 @@ def cmd_rollout(args: argparse.Namespace) -> None:
     from ..integrate import step_failure
     from ..io import check_output_file, load, write, write_json
     from .config import scheme_from_name
-    from .runs import check_names, run_config
+    from ._data_checks import check_names
+    from .runs import run_config
 
     not_an_input(args.out, args)
     out = _check_trajectory_out(args.out, args.overwrite)
@@ -249,19 +250,6 @@ def _departure(units: dict, xs, names) -> dict | None:
     return {"variable": str(names[var]), "standard_deviations": far, "step": step}
 
 
-def _in_sample(run: dict, args, data, chosen) -> list[int]:
-    """The ids of ``data`` that the run in ``run`` (its config.json) trained on, where DATA
-    is the run's training file (its fingerprint); ``[]`` otherwise."""
-    recorded = (run.get("data") or {}).get("sha256")
-    if recorded is None:
-        return []
-    whole = data if chosen is None else _read_data(args, None)
-    if whole.fingerprint()["sha256"] != recorded:
-        return []
-    trained = set(run.get("train_trajectories") or [])
-    return [int(i) for i in data.ids if int(i) in trained]
-
-
 def _chosen_trajectories(args):
     """``--trajectories`` and ``--dt`` of rollout and evaluate, checked before any work."""
     from ._selection import parse_ids
@@ -296,7 +284,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     import json
 
     from ..io import check_output_file, check_output_folder, load, write_json
-    from .runs import check_names, evaluate_run, run_config
+    from ._data_checks import check_names
+    from .runs import evaluate_run, run_config
 
     if args.out:
         not_an_input(args.out, args)
@@ -330,13 +319,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
                  + outlier_warning(data, "evaluated data")):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
-    trained = _in_sample(run, args, data, chosen)
+    trained = trained_on(run, data)
     if trained:
         metrics["trajectories_trained_on"] = len(trained)
-        print(f"warning: DATA is this run's training file, and {len(trained)} of the {k} "
-              "trajectories evaluated were trained on: the errors and the verdict's comparison "
-              "are in-sample, not a test; evaluate on trajectories the run never saw (its "
-              "validation ids are in config.json).", file=sys.stderr)
+        print(in_sample_warning(trained, k), file=sys.stderr)
     if metrics.get("trajectories_ending_before_horizon"):
         print(f"warning: {metrics['trajectories_ending_before_horizon']} of {k} trajectories "
               f"end before --horizon {args.horizon:g}: their rollout_error_to_horizon is over "

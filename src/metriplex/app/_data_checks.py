@@ -1,10 +1,12 @@
 """What ``train`` says of its data before training: one line of what was read, and warnings
 where the data cannot be what the user meant — time and variables swapped, two recordings
 under one trajectory id, a given entropy that falls or never moves, nothing moving at all.
-Each was found read without a word (docs/design.md, *Trajectory data*); none stops training."""
+Each was found read without a word (docs/design.md, *Trajectory data*); none stops training.
+And what data given to a trained model must be: its columns (:func:`check_names`)."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -138,3 +140,25 @@ def entropy_warnings(parts: list[Trajectories], entropy: str) -> list[str]:
     return [f"warning: the entropy of {what} falls along {falls} of {len(net)} trajectories "
             f"(net change {np.median(net):.3g}, the median), where GENERIC's S never decreases. "
             "Is its sign flipped, or is it not an entropy? No GENERIC model fits that."]
+
+
+def check_names(run_dir: str | Path, data: Trajectories) -> None:
+    """The data must have the columns the model was trained on, in the same order."""
+    from ..io import read_header
+    from .._errors import MetriplexError
+
+    header = read_header(run_dir)
+    n, names = header.get("n"), list(header.get("names", []))
+    if n is not None and n != data.n:
+        raise MetriplexError(
+            f"the data have {data.n} state variables but the model in {str(run_dir)!r} was "
+            f"trained on {n} ({', '.join(names)}). Pass data with the same columns."
+        )
+    if names and list(data.names) != names:
+        unknown = [c for c in data.names if c not in names]
+        raise MetriplexError(
+            f"the data's columns ({', '.join(data.names)}) differ from the model's "
+            f"({', '.join(names)})" + (f"; unknown: {', '.join(unknown)}" if unknown else
+                                       "; same names in another order") +
+            ". Rename or reorder the columns to match the training data."
+        )

@@ -2,8 +2,8 @@
 that does not beat predicting no motion, learned temperatures that are negative, a learned
 entropy that rises far more than the data's, a learned energy that does not drive the motion,
 a learned entropy that decreases, data whose time is in another unit than the training
-data's, data that reach where the model was never trained, a validation part that does
-not move, and samples that jump away and back (outliers)."""
+data's, data that reach where the model was never trained, data it was trained on, a
+validation part that does not move, and samples that jump away and back (outliers)."""
 
 from __future__ import annotations
 
@@ -128,9 +128,9 @@ def structure_warnings(metrics: dict) -> list[str]:
                  "semi-definite there (friction_min_eigenvalue in the metrics)")
         out.append(f"warning: the learned entropy decreases at {negative:.0%} of the rollout "
                    f"states: {cause}, so this S is not an entropy of the model's flow. "
-                   "Where L and S are learned, L grad S = 0 is a penalty by "
-                   "default and --degeneracy exact makes it exact with --poisson neural (it can cost accuracy, see "
-                   "docs/zoo.md); where L is given, S must be one of its Casimirs (by "
+                   "Where L and S are learned, L grad S = 0 is a penalty by default and "
+                   "--degeneracy exact makes it exact with --poisson neural or casimir3 (it "
+                   "can cost accuracy, see docs/zoo.md); where L is given, S must be one of its Casimirs (by "
                    "default S is then learned of the variables L leaves free, where L has "
                    "such coordinates; not with --degeneracy soft)."
                    + _idle_friction(metrics.get("reversible_share")))
@@ -261,3 +261,29 @@ def outlier_warning(data: Trajectories, what: str = "training data") -> list[str
     return [f"warning: {len(found)} sample(s) of the {what} jump away and straight back, by "
             f"more than {SPIKE:g}x the typical step: {listed}. If they are recording errors, "
             "remove them: one such pair can dominate the residual it is fitted by."]
+
+
+def trained_on(run: dict, data: Trajectories) -> list[int]:
+    """The ids of ``data`` that the run of ``run`` (its config.json) trained on: those that
+    start where one of its training trajectories starts, to a rounding of 1e-6 (so that the
+    training data written again with fewer digits, or into another file, are caught; runs
+    from before 2026-12-06 did not record the starts)."""
+    import numpy as np
+
+    starts = np.asarray((run.get("data") or {}).get("train_starts") or [], dtype=np.float64)
+    if starts.ndim != 2 or starts.shape[1] != data.n:
+        return []
+    tol = 1e-6 * (np.abs(starts) + np.abs(starts).max(axis=0))
+    return [int(i) for i, (_, x) in zip(data.ids, data)
+            if np.any(np.all(np.abs(starts - x[0]) <= tol, axis=1))]
+
+
+def in_sample_warning(trained: list[int], k: int) -> str:
+    """The warning of ``evaluate`` where the ids ``trained`` of its ``k`` trajectories were
+    trained on (:func:`trained_on`)."""
+    from ._selection import format_ids
+
+    return (f"warning: {len(trained)} of the {k} trajectories evaluated were trained on (they "
+            f"start where this run's training trajectories start: {format_ids(trained)}): the "
+            "errors and the verdict's comparison are in-sample, not a test; evaluate on "
+            "trajectories the run never saw (its validation ids are in config.json).")

@@ -9,6 +9,7 @@ owns a run folder (see ``_lock``).
 
 from __future__ import annotations
 
+import io
 import json
 import sys
 import time
@@ -153,7 +154,8 @@ class RunData(NamedTuple):
         ``trajectories``, ``validation_ids`` and ``source``)."""
         train, valid = split_trajectories(data, config, trajectories=trajectories,
                                           validation_ids=validation_ids)
-        return cls(train, valid, {**(source or {}), **data.fingerprint()},
+        starts = [x[0].tolist() for _, x in train]  # evaluate tells trained-on data by them
+        return cls(train, valid, {**(source or {}), **data.fingerprint(), "train_starts": starts},
                    "fraction" if validation_ids is None else "ids")
 
 
@@ -254,12 +256,13 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     model_key, fit_key = jr.split(jr.key(config.seed))
     given = Given.of(config, train.n)  # a file: L or M read once
     units = units_for(config, train, given)
-    free = casimir_variables(config, given.poisson)
-    for line in [] if resume else data_notes(train, valid, config.entropy, free):
-        print(line, file=sys.stderr)
-    constant = constant_variables(config, train, note=sys.stderr)
+    free, said = casimir_variables(config, given.poisson), io.StringIO()
+    constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
+    for line in ([] if resume else data_notes(train, valid, config.entropy, free)) + \
+            said.getvalue().splitlines():
+        print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
     loss = build_loss(config, units, train)
@@ -358,27 +361,6 @@ def training_outcome(run_dir: str | Path) -> dict:
     stopped = obj.get("stopped")
     return {"converged": converged if isinstance(converged, bool) else None,
             "stopped": stopped if isinstance(stopped, str) and stopped else None}
-
-
-def check_names(run_dir: str | Path, data: Trajectories) -> None:
-    """The data must have the columns the model was trained on, in the same order."""
-    from ..io import read_header
-
-    header = read_header(run_dir)
-    n, names = header.get("n"), list(header.get("names", []))
-    if n is not None and n != data.n:
-        raise MetriplexError(
-            f"the data have {data.n} state variables but the model in {str(run_dir)!r} was "
-            f"trained on {n} ({', '.join(names)}). Pass data with the same columns."
-        )
-    if names and list(data.names) != names:
-        unknown = [c for c in data.names if c not in names]
-        raise MetriplexError(
-            f"the data's columns ({', '.join(data.names)}) differ from the model's "
-            f"({', '.join(names)})" + (f"; unknown: {', '.join(unknown)}" if unknown else
-                                       "; same names in another order") +
-            ". Rename or reorder the columns to match the training data."
-        )
 
 
 def evaluate_run(model: GenericModel, data: Trajectories, *, scheme: str = "cn",
