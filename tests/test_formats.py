@@ -344,6 +344,13 @@ def test_npz_damaged_member(tmp_path):
         ("trajectory,t,q\n0,1,1\n0,0,1\n", r"strictly increasing.*Sort the samples by time"),
         ("trajectory,t,q\n0,0,1\n0,1,1\n1,0,1\n", r"at least two samples.*trajectory 1 has 1"),
         ('trajectory,t,q\n0,0,"1\n', r"not valid CSV \(unexpected end of data\)"),
+        # What a new user's own files gave, each with the fix that applies (not "rename").
+        ("trajectory;t;q\n0;0;1\n", r"separated by ';': metriplex reads comma-separated"),
+        ("trajectory\tt\tq\n0\t0\t1\n", r"separated by a tab"),
+        ("trajectory,t,q\n0,0,1,5\n", r"more columns than the header: decimal commas"),
+        ("trajectory,t,q\nrun0,0,1\n", r"holds 'run0'.*Trajectory ids are integers"),
+        ("trajectory,t,q\n0,2024-01-01T12:00:00,1\n", r"Times are numbers in one unit, not dates"),
+        (",trajectory,t,q\n0,0,0,1\n", r"first two columns are '' and 'trajectory'.*index column"),
     ],
 )
 def test_csv_malformed(tmp_path, text, match):

@@ -31,10 +31,19 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
             with contextlib.suppress(ValueError):
                 [float(c) for c in header]
                 hint = " The first line holds numbers: the header line is missing."
+            sep = next((c for c in ";\t|" if len(header) == 1 and c in header[0]), None)
+            if sep is not None:
+                hint = (f" Its columns are separated by {'a tab' if sep == chr(9) else repr(sep)}"
+                        ": metriplex reads comma-separated files with decimal points (pandas: "
+                        "df.to_csv(path, index=False)).")
+            elif len(header) >= 3 and not hint:
+                hint = (f" The first two columns are {header[0]!r} and {header[1]!r}: name them "
+                        "`trajectory` (integer ids) and `t` (numbers), and leave out an index "
+                        "column (pandas: to_csv(index=False)).")
             raise MetriplexError(
                 f"{where} must start with the header `trajectory,t,<name_1>,...` (at least one "
-                f"state column); got {','.join(header)!r}.{hint} Add, rename or reorder the "
-                "columns."
+                f"state column); got {','.join(header)!r}.{hint}"
+                + (" Add, rename or reorder the columns." if sep is None else "")
             )
         names = header[2:]
         for k, name in enumerate(names):
@@ -108,7 +117,8 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
             raise MetriplexError(
                 f"{where}, line {line}, has {len(r)} columns; the header has {width}. Every row "
                 "needs `trajectory`, `t` and one value per state variable (a short last line "
-                "means a truncated file)."
+                "means a truncated file" + ("; more columns than the header: decimal commas "
+                "such as 1,5 split cells, write decimal points" if len(r) > width else "") + ")."
             )
     arr = np.empty((len(body), width))
     for k, (r, line) in enumerate(zip(body, body_lines)):
@@ -122,9 +132,15 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
                 continue
             if v is None or v != v or v in (float("inf"), float("-inf")):
                 what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
+                fix = "Fix or remove that row (interpolate missing samples)."
+                if v is None and c.strip() and j == 0:
+                    fix = "Trajectory ids are integers (0, 1, 2, ...): number the trajectories."
+                elif v is None and c.strip() and j == 1:
+                    fix = ("Times are numbers in one unit, not dates or clock times: convert "
+                           "the column (pandas: (t - t.iloc[0]).dt.total_seconds()).")
                 raise MetriplexError(
                     f"{where}, line {line}, column {name!r} {what}; every cell must be a "
-                    "finite number. Fix or remove that row (interpolate missing samples)."
+                    f"finite number. {fix}"
                 )
     bad = np.flatnonzero(arr[:, 0] != np.round(arr[:, 0]))
     if len(bad):
