@@ -90,3 +90,19 @@ def test_data_where_nothing_moves_are_pointed_at(bath):
     frozen = _with(bath, x=np.ones_like(bath.x))
     assert any(n.startswith("warning: no variable changes along any trajectory")
                for n in data_notes(frozen, None, "neural"))
+
+
+def test_times_that_do_not_increase_get_the_cause_that_applies():
+    # "Sort the samples by time" would interleave two recordings numbered alike, and cannot
+    # help float32 times that are too coarse for an epoch clock.
+    x = np.zeros((4, 1))
+    with pytest.raises(mx.MetriplexError, match=r"2 separate blocks \(rows 0-1, 4-5\): two "
+                                                r"recordings under one id"):
+        mx.Trajectories(np.array([0, 0, 1, 1, 0, 0]), np.array([0.0, 1, 0, 1, 0, 1]),
+                        np.zeros((6, 1)))
+    epoch = np.float32(1.7e9) + np.arange(4, dtype=np.float32)  # rounds to equal values
+    with pytest.raises(mx.MetriplexError, match=r"float32, which at t = 1\.7e\+09 resolve only "
+                                                r"128"):
+        mx.Trajectories(np.zeros(4, int), epoch, x)
+    with pytest.raises(mx.MetriplexError, match="Sort the samples by time"):
+        mx.Trajectories(np.zeros(4, int), np.array([0.0, 2.0, 1.0, 3.0]), x)

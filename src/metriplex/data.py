@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, Iterator, NamedTuple, Sequence
 
 import numpy as np
 
+from ._data_rules import checked_columns
 from ._errors import MetriplexError
 
 if TYPE_CHECKING:
@@ -159,71 +160,7 @@ class Trajectories:
     names: tuple[str, ...] = ()
 
     def __post_init__(self):
-        traj = np.asarray(self.trajectory)
-        t = np.asarray(self.t, dtype=np.float64)
-        x = np.asarray(self.x)
-        if x.ndim == 1:
-            x = x[:, None]
-        if x.dtype.kind not in "fiu":
-            raise MetriplexError(f"state values must be numbers; got dtype {x.dtype}.")
-        x = np.asarray(x, np.float64)  # no copy of float64 data (large files: memory)
-        if traj.ndim != 1 or t.ndim != 1 or x.ndim != 2:
-            raise MetriplexError(
-                "trajectory and t must be 1-D and x 2-D (rows x variables); got shapes "
-                f"{traj.shape}, {t.shape}, {x.shape}."
-            )
-        if not (len(traj) == len(t) == len(x)):
-            raise MetriplexError(
-                f"trajectory, t and x must have one entry per row; got {len(traj)}, {len(t)} "
-                f"and {len(x)} rows."
-            )
-        if len(t) == 0:
-            raise MetriplexError("the data hold no rows; a file with at least one trajectory of "
-                                 "two or more samples is needed.")
-        if traj.dtype.kind == "f":
-            if not np.all(np.isfinite(traj)) or np.any(traj != np.round(traj)):
-                raise MetriplexError(
-                    "trajectory ids must be integers; got non-integer values such as "
-                    f"{traj[np.flatnonzero(traj != np.round(traj))[:1]]}."
-                )
-        if traj.dtype.kind not in "iuf":
-            raise MetriplexError(f"trajectory ids must be integers; got dtype {traj.dtype}.")
-        traj = traj.astype(np.int64)
-        names = tuple(str(s) for s in self.names) or tuple(f"x{i}" for i in range(x.shape[1]))
-        if len(names) != x.shape[1]:
-            raise MetriplexError(
-                f"got {len(names)} variable names for {x.shape[1]} state columns; give one name "
-                "per column."
-            )
-        if len(set(names)) != len(names):
-            raise MetriplexError(f"variable names must be unique; got {list(names)}.")
-        for arr, what in ((t, "t"), (x, "x")):
-            bad = ~np.isfinite(arr)
-            if np.any(bad):
-                row = int(np.flatnonzero(bad.reshape(len(arr), -1).any(axis=1))[0])
-                raise MetriplexError(
-                    f"data must be finite; {what} has NaN or inf at row {row} (trajectory "
-                    f"{traj[row]}, t={t[row]}). Remove or interpolate those samples."
-                )
-        # Stable sort by trajectory id keeps rows of a trajectory in file order.
-        if np.any(traj[1:] < traj[:-1]):  # already sorted (the usual case): no copies
-            order = np.argsort(traj, kind="stable")
-            traj, t, x = traj[order], t[order], x[order]
-        ids, starts, counts = np.unique(traj, return_index=True, return_counts=True)
-        for i, s, c in zip(ids, starts, counts):
-            if c < 2:
-                raise MetriplexError(
-                    f"every trajectory needs at least two samples to form a training pair; "
-                    f"trajectory {i} has {c}. Drop it or merge it with its neighbour."
-                )
-            dt = np.diff(t[s : s + c])
-            if np.any(dt <= 0):
-                k = int(np.flatnonzero(dt <= 0)[0])
-                raise MetriplexError(
-                    f"`t` must be strictly increasing within each trajectory; trajectory {i} "
-                    f"has t[{k + 1}]={float(t[s + k + 1])!r} <= t[{k}]={float(t[s + k])!r}. Sort "
-                    "the samples by time, drop duplicates, or split the trajectory."
-                )
+        traj, t, x, names = checked_columns(self.trajectory, self.t, self.x, self.names)
         object.__setattr__(self, "trajectory", traj)
         object.__setattr__(self, "t", t)
         object.__setattr__(self, "x", x)
