@@ -429,7 +429,7 @@ Z0 = np.arange(24.0).reshape(2, 3, 4)
 @pytest.mark.parametrize(
     "variables, match",
     [
-        ({"a": np.ones(3), "s": "text"}, r"no state array: .*named one of Z, z, X, x, data, states.*a \(numeric 1×3\); s \(char 1\)\. Rename the variable or pass read_mat\(path, states='NAME'\)"),
+        ({"a": np.ones(3), "s": "text"}, r"no state array: .*named one of Z, z, X, x, data, states, yout.*a \(numeric 1×3\); s \(char 1\)\. Rename the variable \(MATLAB: Z = NAME.*in Python, pass read_mat\(path, states='NAME'\)"),
         ({"Z": Z0, "X": Z0, "dt": 1.0}, r"several candidates for the state array: \['Z', 'X'\].*read_mat\(path, states='Z'\)"),
         ({"Z": Z0, "t": np.arange(4.0), "t_vec": np.arange(4.0)}, r"several candidates for the time vector.*time='t_vec'"),
         ({"Z": Z0}, r"gives no times for state array `Z`.*t_vec, tvec, t.*dt, Dt.*read_mat\(path, dt=STEP\)"),
@@ -562,3 +562,19 @@ def test_property_damaged_files_raise_only_metriplex_errors(ext, cut, flips):
             mx.read(p)
         except MetriplexError as e:
             assert str(p) in str(e)
+
+
+def test_mat_simulink_outputs_and_ragged_cells(tmp_path):
+    # Simulink's workspace output (tout, yout: samples x outputs) had no way in from the
+    # command line; a cell array of ragged runs was told to become a numeric array.
+    t = 0.1 * np.arange(50)
+    y = np.c_[np.cos(t), np.sin(t)]
+    scipy.io.savemat(tmp_path / "sim.mat", {"tout": t[:, None], "yout": y})
+    data = mx.read(tmp_path / "sim.mat")
+    assert data.n == 2 and np.array_equal(data.t, t) and np.array_equal(data.x, y)
+    cells = np.empty((1, 2), dtype=object)
+    cells[0, 0], cells[0, 1] = np.zeros((5, 2)), np.zeros((7, 2))
+    scipy.io.savemat(tmp_path / "cells.mat", {"data": cells, "dt": 0.1})
+    with pytest.raises(mx.MetriplexError, match="different lengths cannot be one array: store "
+                                                "the long table"):
+        mx.read(tmp_path / "cells.mat")

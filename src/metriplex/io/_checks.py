@@ -89,7 +89,10 @@ def _real(v, what: str, where: str) -> np.ndarray:
     if a.dtype.kind not in "fiu":
         raise MetriplexError(
             f"{what} in {where} must hold numbers; it is {_describe(a)} (dtype {a.dtype}). "
-            "Convert it to a numeric (double) array."
+            "Convert it to a numeric (double) array" + (
+                "; trajectories of different lengths cannot be one array: store the long "
+                "table instead, `trajectory` and `t` (one entry per sample) and `x` (samples × "
+                "variables)" if a.dtype == object else "") + "."
         )
     if a.size == 0:
         raise MetriplexError(f"{what} in {where} is empty ({_shape(a)}); it holds no values.")

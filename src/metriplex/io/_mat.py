@@ -7,9 +7,10 @@ are MATLAB's ``size()``:
 1. *Snapshots* — the layout of the published structure-preserving-network (SPNN) datasets
    (``Z``, ``t_vec``, ``dt``, ``L``, ``M``): one array of trajectories × variables × snapshots,
    ``(K, n, T)``, or variables × snapshots ``(n, T)`` for one trajectory, named one of
-   ``Z, z, X, x, data, states`` (stored the other way round, ``(K, T, n)`` or ``(T, n)``, it
+   ``Z, z, X, x, data, states, yout`` (stored the other way round, ``(K, T, n)`` or ``(T, n)``, it
    is read so where its time vector's length says so). Times come from a vector named one of
-   ``t_vec, tvec, t, time, times, ts`` — shared ``(T,)``/``(1, T)``/``(T, 1)`` or per trajectory
+   ``t_vec, tvec, t, time, times, ts, tout`` (Simulink's ``tout`` and ``yout`` read as they
+   are) — shared ``(T,)``/``(1, T)``/``(T, 1)`` or per trajectory
    ``(K, T)`` — or from a step named one of ``dt, Dt, DT, delta_t`` (scalar, or ``(K,)`` per
    trajectory; times are then ``0, dt, 2 dt, ...``). With both, the vector is used and the step
    must match its spacing (to 0.1 %). ``dt=STEP`` (the command line's ``--dt``) replaces all of
@@ -41,8 +42,8 @@ from ._checks import _build, _check_file, _found, _q, _real, _shape, _strings, _
 from ._files import atomic_write
 from ._mat_load import _load_mat
 
-STATE_KEYS = ("Z", "z", "X", "x", "data", "states")
-TIME_KEYS = ("t_vec", "tvec", "t", "time", "times", "ts")
+STATE_KEYS = ("Z", "z", "X", "x", "data", "states", "yout")
+TIME_KEYS = ("t_vec", "tvec", "t", "time", "times", "ts", "tout")
 STEP_KEYS = ("dt", "Dt", "DT", "delta_t")
 NAME_KEYS = ("names", "var_names", "variables", "labels")
 OPERATOR_KEYS = ("L", "M")
@@ -191,7 +192,9 @@ def _pick(
     present = [k for k in keys if k in scope and not isinstance(scope[k], dict)]
     if len(present) > 1:
         fix = (
-            f"Name the one to use, e.g. read_mat(path, {option}={present[0]!r})."
+            f"Name the one to use, e.g. read_mat(path, {option}={present[0]!r}) in Python; for "
+            f"the command line keep one under that name (MATLAB: save(file, {present[0]!r}, "
+            "...) with the others left out)."
             if option else "Rename or remove all but one."
         )
         raise MetriplexError(f"{where} holds several candidates for {what}: {present}. {fix}")
@@ -209,8 +212,8 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
         raise MetriplexError(
             f"{where} holds no state array: expected a trajectories × variables × snapshots "
             f"array named one of {', '.join(STATE_KEYS)} (or the long table `trajectory`, `t`, "
-            f"`x`); it holds {_found(scope)}. Rename the variable or pass "
-            "read_mat(path, states='NAME')."
+            f"`x`); it holds {_found(scope)}. Rename the variable (MATLAB: Z = NAME; save(file, "
+            "'Z', 't')) or, in Python, pass read_mat(path, states='NAME')."
         )
     Z = _real(scope[key], f"state array `{key}`", where)
     if Z.ndim == 2:
