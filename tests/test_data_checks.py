@@ -106,3 +106,19 @@ def test_times_that_do_not_increase_get_the_cause_that_applies():
         mx.Trajectories(np.zeros(4, int), epoch, x)
     with pytest.raises(mx.MetriplexError, match="Sort the samples by time"):
         mx.Trajectories(np.zeros(4, int), np.array([0.0, 2.0, 1.0, 3.0]), x)
+
+
+def test_a_mat_file_holding_L_and_M_says_so(tmp_path):
+    import scipy.io
+
+    from metriplex.app._data_checks import operators_note
+
+    Z = np.random.default_rng(0).normal(size=(2, 2, 5))
+    scipy.io.savemat(tmp_path / "db.mat", {"Z": Z, "dt": 0.1, "L": [[0, 1], [-1, 0]],
+                                           "M": np.zeros((2, 2))})
+    path = tmp_path / "db.mat"
+    (line,) = operators_note(path, "neural", "neural")
+    assert "also holds a constant L and M, which this run learns instead; --poisson file:" in line
+    (line,) = operators_note(path, f"file:{path}", "neural")
+    assert "constant M" in line and "--poisson" not in line
+    assert operators_note(path, f"file:{path}", f"file:{path}") == []

@@ -134,6 +134,14 @@ def nothing_written(folder):
          r"1 <= K <= 1\.", ()),
         (["--poisson", "canonical:0"], r"canonical:K needs K >= 1 .*; got K=0\. Use "
                                        r"canonical:K with 1 <= K <= 1 for these n=3", ()),
+        # a preset on other data: its structure is named as the preset's, not the user's
+        (["--preset", "pendulum-energetic"], r"--preset pendulum-energetic \(its reference "
+         r"experiment's settings: --poisson canonical:4 --entropy sum:8,9 \.\.\.\) does not fit "
+         r"these data: .* Leave --preset out for other data\.", ()),
+        (["--degeneracy", "exact", "--poisson", "lie-poisson"], r"--degeneracy exact builds a "
+         r"learned L with L grad S = 0, which a Lie-Poisson L .* cannot be", ()),
+        (["--entropy", "sum:"], r"--entropy sum:I,J,... names no variable; got ''\. Give at "
+         r"least one index", ()),
         # argparse's own errors: one line, not the whole usage text
         (["--steps", "abc"], r"argument --steps: invalid int value: 'abc'\. See `metriplex "
          r"train --help`", ("usage:",)),
@@ -391,6 +399,12 @@ def test_unwritable_folder_as_any_user(files, tmp_path, monkeypatch):
     refused(run("simulate", "rigid-body", "--trajectories", "1", "--steps", "2", "--dt", "0.1",
                 "--out", ro / "s.npz"), r"the folder '.*ro' is not writable")
     assert list(ro.iterdir()) == []
+
+
+def test_run_and_data_swapped(files, tmp_path):
+    res = run("evaluate", files / "data.npz", files / "data.npz", "--out", tmp_path / "m.json")
+    refused(res, r"is not a metriplex model file .* Its name is that of a data file: the "
+                 r"commands take the run folder \(or model file\) first")
 
 
 def test_evaluate_options(files, tmp_path):

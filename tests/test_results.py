@@ -62,6 +62,13 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                                    "3000"), metrics, 30.0, Path("run"), first_stage=True)
     assert "--steps" not in timed and "allow more time (--max-minutes)" in timed
     assert "(15.2 s: what the first stage left of --max-minutes) at step 3000" in timed
+    assert "never trained" not in timed
+    # A first stage that took the whole budget left the main stage (the friction) untrained.
+    spent = train_summary(History(step=[0], best_step=0, converged=False,
+                                  stopped="time budget reached (1 s) at step 0"),
+                          metrics, 12.0, Path("run"), first_stage=True)
+    assert "the first stage took the whole budget, so the main stage (the friction with it) " \
+           "never trained: allow more time (--max-minutes)" in spent
     done = train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
                           Path("run"))
     assert "not converged" not in done and "FAILED" not in done and "NO trained" not in done

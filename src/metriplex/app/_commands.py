@@ -98,6 +98,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     """Train a model on ``args.data`` into the run folder ``--out`` (``metriplex train``), evaluate
     it on the validation trajectories and print a summary; the exit status 130 when the training was
     interrupted, else ``None``."""
+    from ._data_checks import operators_note
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from ._repeats import trainings_note
@@ -114,9 +115,19 @@ def cmd_train(args: argparse.Namespace) -> int | None:
                                 validation_ids=args.validation_ids, split=args.split,
                                 validation=args.validation)
     data = read(args.data, dt=args.dt)
-    validate(config, data.n)
+    try:
+        validate(config, data.n)
+    except MetriplexError as e:  # a preset's structure is not the user's typing: say whose
+        if not args.preset:
+            raise
+        raise MetriplexError(f"--preset {args.preset} (its reference experiment's settings: "
+                             f"--poisson {config.poisson} --entropy {config.entropy} ...) does "
+                             f"not fit these data: {e} Leave --preset out for other data.") \
+            from None
     trajectories, validation_ids = choose_trajectories(
         data.ids, f"the data file {str(args.data)!r}", selection)
+    for line in operators_note(args.data, config.poisson, config.friction):
+        print(line, file=sys.stderr)
     # The lock covers the evaluation and metrics.json too, not only the training.
     with RunLock(out) as lock:
         if lock.note:

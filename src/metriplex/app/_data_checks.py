@@ -162,3 +162,26 @@ def check_names(run_dir: str | Path, data: Trajectories) -> None:
                                        "; same names in another order") +
             ". Rename or reorder the columns to match the training data."
         )
+
+
+def operators_note(path: str | Path, poisson: str, friction: str) -> list[str]:
+    """A note where a ``.mat`` file holds a constant L or M beside its trajectories (as the
+    published GENERIC datasets do) that the run learns instead (``poisson``, ``friction``: the
+    run's ``--poisson`` and ``--friction``)."""
+    from .._errors import MetriplexError
+    from ..io import read_mat_operators
+
+    if Path(path).suffix.lower() != ".mat":
+        return []
+    try:
+        ops = read_mat_operators(path)
+    except MetriplexError:
+        return []
+    unused = [(k, f) for k, f, given in (("L", "--poisson", poisson), ("M", "--friction", friction))
+              if k in ops and not given.startswith("file:")]
+    if not unused:
+        return []
+    return [f"note: {str(path)!r} also holds a constant {' and '.join(k for k, _ in unused)}, "
+            "which this run learns instead; "
+            + " ".join(f"{f} file:{path}" for _, f in unused) + " would use "
+            + ("them" if len(unused) > 1 else "it") + " as given."]

@@ -70,8 +70,13 @@ def indices(text: str, n: int, option: str) -> tuple[int, ...]:
         raise MetriplexError(
             f"{option} expects comma-separated integer indices (e.g. 8,9); got {text!r}."
         ) from None
+    if not idx:
+        raise MetriplexError(
+            f"{option} names no variable; got {text!r}. Give at least one index, counted from "
+            "0 after `trajectory` and `t` (e.g. 2)."
+        )
     bad = [i for i in idx if not 0 <= i < n]
-    if not idx or bad:
+    if bad:
         raise MetriplexError(
             f"{option} indices must lie in [0, {n - 1}] for data with {n} variables; got "
             f"{list(idx)}. Count state columns from 0 (after `trajectory` and `t`)."

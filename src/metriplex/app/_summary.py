@@ -26,6 +26,9 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     timed = ended.startswith("time budget")
     if timed and first_stage:  # the stage's budget is what the earlier ones left of the run's
         ended = ended.replace(" s)", " s: what the first stage left of --max-minutes)", 1)
+        if last == 0:
+            ended += ("; the first stage took the whole budget, so the main stage (the "
+                      "friction with it) never trained: allow more time (--max-minutes)")
     if not history.converged and history.best_step == last and last > 0:
         ended += ("; the best model is the last one: not converged, allow more "
                   + ("time (--max-minutes)" if timed else "--steps"))

@@ -108,9 +108,13 @@ def _model_path(path) -> Path:
 
 def _header(f, path) -> dict[str, Any]:
     if f.read(len(MAGIC)) != MAGIC:
+        data = Path(path).suffix.lower() in (".npz", ".csv", ".h5", ".hdf5", ".mat")
         raise MetriplexError(
             f"{str(path)!r} is not a metriplex model file (wrong magic bytes); it may be "
-            "corrupted or of another format."
+            "corrupted or of another format." + (
+                " Its name is that of a data file: the commands take the run folder (or "
+                "model file) first and the data second, e.g. `metriplex evaluate RUN DATA`."
+                if data else "")
         )
     line = f.readline()
     try:
