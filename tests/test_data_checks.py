@@ -122,3 +122,25 @@ def test_a_mat_file_holding_L_and_M_says_so(tmp_path):
     (line,) = operators_note(path, f"file:{path}", "neural")
     assert "constant M" in line and "--poisson" not in line
     assert operators_note(path, f"file:{path}", f"file:{path}") == []
+
+
+def test_numpy_dates_and_durations_are_read_in_seconds():
+    # datetime64[ms] times became counts of milliseconds without a word.
+    x = np.zeros((3, 1))
+    dates = np.array(["2024-01-01T00:00:00.000", "2024-01-01T00:00:00.100",
+                      "2024-01-01T00:00:00.200"], dtype="datetime64[ms]")
+    t = mx.Trajectories(np.zeros(3, int), dates, x).t
+    np.testing.assert_allclose(np.diff(t), 0.1, rtol=1e-5)
+    assert abs(t[0] - 1704067200.0) < 1e-3  # seconds since 1970
+    spans = np.array([0, 100_000, 250_000], dtype="timedelta64[us]")
+    np.testing.assert_array_equal(mx.Trajectories(np.zeros(3, int), spans, x).t, [0, 0.1, 0.25])
+
+
+def test_a_variable_recorded_twice_is_pointed_at(bath):
+    from metriplex.app._data_checks import repeated_column_warning
+
+    twice = mx.Trajectories(bath.trajectory, bath.t, np.c_[bath.x, bath.x[:, 0]],
+                            (*bath.names, "q2"))
+    (line,) = repeated_column_warning([twice])
+    assert line.startswith("warning: q2 repeats q (the same values in every sample)")
+    assert repeated_column_warning([bath]) == []

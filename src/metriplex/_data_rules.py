@@ -12,11 +12,13 @@ from ._errors import MetriplexError
 
 def checked_columns(trajectory: Any, t: Any, x: Any, names: Any
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[str, ...]]:
-    """``(trajectory, t, x, names)`` as int64 ids, float64 times and states sorted by
-    trajectory (stably: file order within one), and one name per variable; refused where a
-    rule fails."""
+    """``(trajectory, t, x, names)`` as int64 ids, float64 times (numpy dates and durations
+    in seconds) and states sorted by trajectory (stably: file order within one), and one name
+    per variable; refused where a rule fails."""
     traj = raw = np.asarray(trajectory)
     t_given = np.asarray(t)
+    if t_given.dtype.kind in "mM":  # dates or durations: seconds, whatever numpy's unit
+        t_given = t_given.astype(t_given.dtype.str[:3] + "[ns]").astype(np.int64) / 1e9
     t = np.asarray(t_given, dtype=np.float64)
     x = np.asarray(x)
     if x.ndim == 1:

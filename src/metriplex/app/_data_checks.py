@@ -1,6 +1,7 @@
 """What ``train`` says of its data before training: one line of what was read, and warnings
 where the data cannot be what the user meant — time and variables swapped, two recordings
-under one trajectory id, a given entropy that falls or never moves, nothing moving at all.
+under one trajectory id, a variable recorded twice, a given entropy that falls or never
+moves, nothing moving at all.
 Each was found read without a word (docs/design.md, *Trajectory data*); none stops training.
 And what data given to a trained model must be: its columns (:func:`check_names`)."""
 
@@ -34,6 +35,7 @@ def data_notes(train: Trajectories, valid: Trajectories | None, entropy: str,
     ``free`` that a given L leaves free (:func:`._warnings.casimir_note`)."""
     parts = [train] if valid is None else [train, valid]
     return ([data_summary(train, valid)] + swapped_axes_warning(parts) + gap_warning(parts)
+            + repeated_column_warning(parts)
             + outlier_warning(train) + still_validation_warning(train, valid)
             + still_data_warning(parts) + entropy_warnings(parts, entropy)
             + casimir_note(free, train))
@@ -103,6 +105,22 @@ def gap_warning(parts: list[Trajectories]) -> list[str]:
     return [f"warning: {len(found)} time step(s) of more than {GAP:g}x their trajectory's median "
             f"step: {listed}. Two recordings under one trajectory id, or lost samples? Give "
             "each recording its own id: the pair across a gap is fitted like any other."]
+
+
+def repeated_column_warning(parts: list[Trajectories]) -> list[str]:
+    """Two columns with the same values in every sample (not constant): one variable recorded
+    twice, which a structure must then keep equal."""
+    x = np.concatenate([p.x for p in parts])
+    names, found, seen = parts[0].names, [], {}
+    for j, key in enumerate(zip(x[0], x[-1], x.sum(axis=0))):  # compared in full only if alike
+        same = [i for i in seen.get(key, []) if np.array_equal(x[:, i], x[:, j])]
+        if same and np.ptp(x[:, j]) > 0:
+            found.append(f"{names[j]} repeats {names[same[0]]}")
+        seen.setdefault(key, []).append(j)
+    if not found:
+        return []
+    return [f"warning: {'; '.join(found[:4])} (the same values in every sample): a variable "
+            "recorded twice? Drop the copy: the model has to learn to keep the two equal."]
 
 
 def still_data_warning(parts: list[Trajectories]) -> list[str]:
