@@ -140,6 +140,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             parts, config, out, overwrite=args.overwrite, resume=args.resume,
             progress=not args.quiet)
         target = valid if valid is not None else train
+        split_in_time = valid is not None and set(valid.ids) == set(train.ids)
         # The evaluation holds only what it rolls out (large data: memory). The loss figure
         # leaves a reference cycle through matplotlib's frames that holds the training's
         # locals, the training part among them, until the collector runs: collect now.
@@ -150,8 +151,9 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
                                progress=not args.quiet, step_check=False)
         metrics["train_seconds"] = seconds
-        metrics["evaluated_on"] = ("validation trajectories" if valid is not None
-                                   else "training data")
+        metrics["evaluated_on"] = (
+            "training data" if valid is None else "validation trajectories" if not split_in_time
+            else "the validation part (each trajectory's end, after its training part)")
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
