@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ._option import entropy_variables
-from ._warnings import casimir_note, outlier_warning, still_validation_warning
+from ._warnings import casimir_note, listing, outlier_warning, still_validation_warning
 
 if TYPE_CHECKING:
     from ..data import Trajectories
@@ -99,12 +99,10 @@ def gap_warning(parts: list[Trajectories]) -> list[str]:
         for k in np.nonzero(dt > GAP * typical)[0] if typical > 0 else ():
             found.append(f"trajectory {tid} from t = {t[k]:.6g} to {t[k + 1]:.6g} "
                          f"({dt[k] / typical:.3g}x its median step {typical:.3g})")
-    if not found:
-        return []
-    listed = "; ".join(found[:4]) + ("; ..." if len(found) > 4 else "")
     return [f"warning: {len(found)} time step(s) of more than {GAP:g}x their trajectory's median "
-            f"step: {listed}. Two recordings under one trajectory id, or lost samples? Give "
-            "each recording its own id: the pair across a gap is fitted like any other."]
+            f"step: {listing(found, 4)}. Two recordings under one trajectory id, or lost "
+            "samples? Give each recording its own id: the pair across a gap is fitted like any "
+            "other."] if found else []
 
 
 def repeated_column_warning(parts: list[Trajectories]) -> list[str]:

@@ -255,12 +255,15 @@ def outlier_warning(data: Trajectories, what: str = "training data") -> list[str
         calm = np.minimum(np.abs(d[:-1]), np.abs(d[1:])) > SPIKE * np.maximum(pad[:-3], pad[3:])
         for k, i in zip(*np.nonzero(back & calm)):
             found.append(f"trajectory {tid} at t = {t[k + 1]:.6g} ({data.names[i]})")
-    if not found:
-        return []
-    listed = "; ".join(found[:5]) + ("; ..." if len(found) > 5 else "")
     return [f"warning: {len(found)} sample(s) of the {what} jump away and straight back, by "
-            f"more than {SPIKE:g}x the typical step: {listed}. If they are recording errors, "
-            "remove them: one such pair can dominate the residual it is fitted by."]
+            f"more than {SPIKE:g}x the typical step: {listing(found, 5)}. If they are recording "
+            "errors, remove them: one such pair can dominate the residual it is fitted by."
+            ] if found else []
+
+
+def listing(found: list[str], most: int) -> str:
+    """The first ``most`` of ``found``, joined by semicolons, with "..." for the rest."""
+    return "; ".join(found[:most]) + ("; ..." if len(found) > most else "")
 
 
 def trained_on(run: dict, data: Trajectories) -> list[int]:
