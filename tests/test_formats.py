@@ -499,7 +499,7 @@ def test_mat_v73_truncated(tmp_path):
 
 
 def test_read_names_the_file_and_refuses_unknown_suffix(tmp_path):
-    with pytest.raises(MetriplexError, match=r"unknown extension '\.xlsx'. Supported: \.csv, \.h5, \.hdf5, \.mat, \.npz"):
+    with pytest.raises(MetriplexError, match=r"unknown extension '\.xlsx'. Supported: \.csv, \.h5, \.hdf5, \.mat, \.npy, \.npz"):
         mx.read(_bytes(tmp_path, "d.xlsx", b"x"))
     with pytest.raises(MetriplexError, match=r"does not exist"):
         mx.read(tmp_path / "missing.h5")
@@ -578,3 +578,26 @@ def test_mat_simulink_outputs_and_ragged_cells(tmp_path):
     with pytest.raises(mx.MetriplexError, match="different lengths cannot be one array: store "
                                                 "the long table"):
         mx.read(tmp_path / "cells.mat")
+
+
+def test_npy_states_alone_with_a_step(tmp_path):
+    # A bare (K, T, n) array is how many datasets come; it was refused as an unknown format.
+    rng = np.random.default_rng(0)
+    states = rng.normal(size=(3, 7, 2))
+    np.save(tmp_path / "x.npy", states)
+    np.save(tmp_path / "one.npy", states[1])
+    with pytest.raises(MetriplexError, match=r"holds states only \(3x7x2\), no times: pass --dt"):
+        mx.read(tmp_path / "x.npy")
+    data = mx.read(tmp_path / "x.npy", dt=0.25)
+    assert len(data) == 3 and data.n == 2
+    for k, (t, x) in enumerate(data):
+        assert np.array_equal(t, 0.25 * np.arange(7)) and np.array_equal(x, states[k])
+    one = mx.read(tmp_path / "one.npy", dt=0.25)
+    assert len(one) == 1 and np.array_equal(one.x, states[1])
+    np.save(tmp_path / "bad.npy", np.zeros(4))
+    with pytest.raises(MetriplexError, match=r"1-D array .* \(K, T, n\) or snapshots x "
+                                             r"variables \(T, n\)"):
+        mx.read(tmp_path / "bad.npy", dt=0.1)
+    with pytest.raises(MetriplexError, match=r"unknown extension '\.npy'\. Trajectories are "
+                                             r"written as"):
+        mx.write(tmp_path / "out.npy", data)

@@ -55,9 +55,10 @@ def test_presets_experiments_and_formats_in_the_help_come_from_their_tables(monk
     train, simulate = _help("train", monkeypatch), _help("simulate", monkeypatch)
     reproduce = _help("reproduce", monkeypatch)
     assert " | ".join(config.PRESETS) in train and " | ".join(EXPERIMENTS) in reproduce
-    for suffixes, _, _, layout in FORMATS:
-        for suffix in suffixes:
-            assert suffix in simulate and suffix in _help("rollout", monkeypatch)
+    for suffixes, _, writer, layout in FORMATS:
+        for suffix in suffixes:  # the formats written, where a command writes data
+            written = suffix in simulate and suffix in _help("rollout", monkeypatch)
+            assert written == (writer is not None), suffix
         assert re.sub(r"\s+", " ", layout) in train  # the data format, in the epilog
     for name in config.FEATURES:
         assert name in train

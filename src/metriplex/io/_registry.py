@@ -17,12 +17,13 @@ from ..data import Trajectories, check_time_step, uniform_times
 from ._csv import read_csv, write_csv
 from ._hdf5 import read_hdf5, write_hdf5
 from ._mat import read_mat, write_mat
+from ._npy import read_npy
 from ._npz import read_npz, write_npz
 
 #: Each format: its suffixes (lower case), its reader, its writer and its layout in one line
 #: (what the command line's help says of it).
-FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories], Callable[..., None], str],
-               ...] = (
+FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories],
+                     Callable[..., None] | None, str], ...] = (
     ((".npz",), read_npz, write_npz,
      "arrays trajectory (N,), t (N,), x (N, n), optional names (n,)"),
     ((".csv",), read_csv, write_csv,
@@ -31,16 +32,20 @@ FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories], Callable[...,
      "one group per trajectory, each with datasets t (T,) and x (T, n)"),
     ((".mat",), read_mat, write_mat,
      "snapshots (trajectories x variables x snapshots) with a time vector or step"),
+    ((".npy",), read_npy, None,
+     "states only, trajectories x snapshots x variables (K, T, n) or (T, n); with --dt"),
 )
 
 #: Suffix -> reader and suffix -> writer, from :data:`FORMATS`.
 READERS: dict[str, Callable[..., Trajectories]] = {s: r for ss, r, _, _ in FORMATS for s in ss}
-WRITERS: dict[str, Callable[..., None]] = {s: w for ss, _, w, _ in FORMATS for s in ss}
+WRITERS: dict[str, Callable[..., None]] = {s: w for ss, _, w, _ in FORMATS for s in ss
+                                           if w is not None}  # .npy holds no times
 
 
 def suffixes_text() -> str:
-    """Every suffix of :data:`FORMATS` in a phrase: ``".npz, .csv, .h5, .hdf5 or .mat"``."""
-    suffixes = [s for ss, _, _, _ in FORMATS for s in ss]
+    """Every suffix that :func:`write` writes, in a phrase: ``".npz, .csv, .h5, .hdf5 or
+    .mat"``."""
+    suffixes = [s for ss, _, w, _ in FORMATS for s in ss if w is not None]
     return ", ".join(suffixes[:-1]) + " or " + suffixes[-1]
 
 
@@ -50,9 +55,9 @@ def layouts_text() -> str:
 
 
 def read(path: str | os.PathLike, *, dt: float | None = None) -> Trajectories:
-    """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``) or MATLAB
-    (``.mat``). Layouts: docs/design.md, 'Trajectory data', :mod:`metriplex.io._hdf5` and
-    :mod:`metriplex.io._mat`.
+    """Read trajectories: the long table (``.npz``, ``.csv``), HDF5 (``.h5``, ``.hdf5``), MATLAB
+    (``.mat``) or states alone (``.npy``, with ``dt``). Layouts: docs/design.md, 'Trajectory
+    data', :mod:`metriplex.io._hdf5`, :mod:`metriplex.io._mat` and :mod:`metriplex.io._npy`.
 
     ``dt``: give every trajectory the uniform time grid ``t = k * dt`` (``k = 0, 1, ...`` in the
     file's order of its samples), for a file that lacks times or holds a time vector that does
