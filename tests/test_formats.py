@@ -285,7 +285,7 @@ def test_any_format_empty_garbage_and_truncated(tmp_path, ext):
 @pytest.mark.parametrize(
     "arrays, match",
     [
-        (dict(t=GOOD["t"], x=GOOD["x"]), r"lacks the array\(s\) \['trajectory'\].*Found \['t', 'x'\]"),
+        (dict(t=GOOD["t"], x=GOOD["x"]), r"lacks the array `trajectory`: without it .* t does not increase at row 2 .*Found \['t', 'x'\]"),
         ({**GOOD, "v": np.ones(4)}, r"unknown array\(s\) \['v'\].*make them columns of `x`"),
         ({**GOOD, "names": np.array(["q"])}, r"got 1 variable names for 2 state columns"),
         ({**GOOD, "names": np.array([1, 2])}, r"`names`.*must hold strings.*int64"),
@@ -601,3 +601,24 @@ def test_npy_states_alone_with_a_step(tmp_path):
     with pytest.raises(MetriplexError, match=r"unknown extension '\.npy'\. Trajectories are "
                                              r"written as"):
         mx.write(tmp_path / "out.npy", data)
+
+
+def test_npz_stacked_states_without_trajectory_ids(tmp_path):
+    # np.savez(f, x=(K, T, n), t=(T,)) was refused for lacking `trajectory`.
+    rng = np.random.default_rng(1)
+    x, t = rng.normal(size=(3, 6, 2)), 0.5 * np.arange(6)
+    np.savez(tmp_path / "k.npz", x=x, t=t)
+    np.savez(tmp_path / "one.npz", x=x[2], t=t)
+    np.savez(tmp_path / "bare.npz", x=x)
+    data = mx.read(tmp_path / "k.npz")
+    assert len(data) == 3 and all(np.array_equal(tk, t) and np.array_equal(xk, x[k])
+                                  for k, (tk, xk) in enumerate(data))
+    assert len(mx.read(tmp_path / "one.npz")) == 1
+    with pytest.raises(MetriplexError, match=r"lacks the array\(s\) \['t'\].*pass --dt STEP"):
+        mx.read(tmp_path / "bare.npz")
+    assert np.array_equal(next(iter(mx.read(tmp_path / "bare.npz", dt=0.1)))[0],
+                          0.1 * np.arange(6))
+    np.savez(tmp_path / "short.npz", x=x, t=t[:4])
+    with pytest.raises(MetriplexError, match=r"`t` .* is \(4,\), but `x` \(3, 6, 2\) has 6 "
+                                             r"snapshots"):
+        mx.read(tmp_path / "short.npz")

@@ -1,5 +1,8 @@
 """The long table as NPZ, the native format: arrays ``trajectory`` (N,), ``t`` (N,), ``x``
-(N, n) and optionally ``names`` (n,) (docs/design.md, 'Trajectory data'). Nothing is unpickled.
+(N, n) and optionally ``names`` (n,) (docs/design.md, 'Trajectory data'). Without
+``trajectory``, ``x`` may also be stacked: one trajectory ``(T, n)`` or trajectories ×
+snapshots × variables ``(K, T, n)``, with ``t`` of ``(T,)`` or ``(K, T)``. Nothing is
+unpickled.
 """
 
 from __future__ import annotations
@@ -47,6 +50,8 @@ def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
                 f"{raw.reshape(-1)[:5].tolist()}. Save np.array(names, dtype=str)."
             )
         names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in raw.reshape(-1))
+    if "trajectory" not in arrays:
+        arrays.update(_stacked(arrays, where, dt))
     t = arrays["t"] if dt is None else uniform_times(arrays["trajectory"], dt)
     try:
         return Trajectories(arrays["trajectory"], t, arrays["x"], names)
@@ -54,13 +59,47 @@ def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
         raise MetriplexError(f"{where}: {e}") from None
 
 
+def _stacked(arrays: dict, where: str, dt: float | None) -> dict[str, np.ndarray]:
+    """The long table of ``x`` without ``trajectory``: ``(T, n)`` is one trajectory, ``(K, T,
+    n)`` K of them, with ``t`` of ``(T,)`` (shared) or ``(K, T)`` (unless ``dt`` replaces it)."""
+    x = arrays["x"]
+    if x.ndim not in (2, 3):
+        raise MetriplexError(
+            f"array `x` of {where} is {x.ndim}-D {x.shape}; without `trajectory` it must be one "
+            "trajectory (T, n) or trajectories x snapshots x variables (K, T, n).")
+    xs = x[None] if x.ndim == 2 else x
+    K, T, n = xs.shape
+    out = {"trajectory": np.repeat(np.arange(K), T), "x": xs.reshape(K * T, n)}
+    if dt is None:
+        t = np.asarray(arrays["t"])
+        if t.shape not in ((T,), (K, T)):
+            raise MetriplexError(
+                f"array `t` of {where} is {t.shape}, but `x` {x.shape} has {T} snapshots per "
+                f"trajectory: give t of ({T},) (shared) or ({K}, {T}), or `trajectory` (N,) "
+                "beside t and x of one row per sample (the long table).")
+        out["t"] = np.broadcast_to(t, (K, T)).reshape(-1)
+        back = np.flatnonzero(np.diff(t.reshape(-1, T), axis=1) <= 0) if x.ndim == 2 else []
+        if len(back):  # a long table without its ids, not one trajectory
+            raise MetriplexError(
+                f"{where} lacks the array `trajectory`: without it `t` and `x` {x.shape} are one "
+                f"trajectory, but t does not increase at row {back[0] + 1} ({t[back[0] + 1]!r} "
+                f"after {t[back[0]]!r}). Give `trajectory` (N,), the id of each row's "
+                f"trajectory (the long table). Found {sorted(arrays)}.")
+    return out
+
+
 def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
     found = sorted(z.files)
-    missing = [k for k in ("trajectory", "t", "x") if k not in found and (need_t or k != "t")]
+    # Without `trajectory`: one trajectory of x (T, n), or trajectories of x (K, T, n).
+    optional = {"trajectory"} if "x" in found else set()
+    missing = [k for k in ("trajectory", "t", "x")
+               if k not in found and (need_t or k != "t") and k not in optional]
     if missing:
         raise MetriplexError(
             f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
             f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
+            + (" For evenly spaced samples without times, pass --dt STEP (read(path, "
+               "dt=STEP) in Python)." if missing == ["t"] else "")
         )
     unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
     if unknown:

@@ -25,7 +25,7 @@ from ._npz import read_npz, write_npz
 FORMATS: tuple[tuple[tuple[str, ...], Callable[..., Trajectories],
                      Callable[..., None] | None, str], ...] = (
     ((".npz",), read_npz, write_npz,
-     "arrays trajectory (N,), t (N,), x (N, n), optional names (n,)"),
+     "arrays trajectory (N,), t (N,), x (N, n), optional names (n,); or x (K, T, n), t (T,)"),
     ((".csv",), read_csv, write_csv,
      "columns trajectory,t,<name_1>,...,<name_n> (integer trajectory id, time, the state)"),
     ((".h5", ".hdf5"), read_hdf5, write_hdf5,
