@@ -400,7 +400,7 @@ def _traj(f, name, T=3, n=2, **attrs):
         (lambda f: (_traj(f, "a"), f.create_dataset("x", data=np.ones(3))), r"holds \['x'\] at its root, which are not trajectory groups"),
         (lambda f: f.create_group("a").create_dataset("t", data=np.arange(3.0)), r"group 'a'.*lacks the dataset\(s\) \['x'\]; it holds \['t'\]"),
         (lambda f: _traj(f, "a").create_dataset("v", data=np.ones(3)), r"group 'a'.*unknown member\(s\) \['v'\]"),
-        (lambda f: f.create_group("a").update(t=np.arange(3.0), x=np.ones((2, 3))), r"`x` in group 'a'.*shape \(2, 3\); with 3 times in `t` it must be \(3, n\).*transposed"),
+        (lambda f: f.create_group("a").update(t=np.arange(3.0), x=np.ones((2, 4))), r"`x` in group 'a'.*shape \(2, 4\); with 3 times in `t` it must be \(3, n\), one row per time \(or \(n, 3\)\)"),
         (lambda f: (_traj(f, "a"), _traj(f, "b", n=3)), r"same number of state variables.*'a' has 2 and group 'b' has 3"),
         (lambda f: (_traj(f, "a", names=["q", "p"]), _traj(f, "b", names=["q", "v"])), r"names of group 'b'.*\['q', 'v'\].*differ from those of group 'a'"),
         (lambda f: (f.attrs.update(names=["q"]), _traj(f, "a")), r"got 1 variable names for 2 state columns"),
@@ -622,3 +622,13 @@ def test_npz_stacked_states_without_trajectory_ids(tmp_path):
     with pytest.raises(MetriplexError, match=r"`t` .* is \(4,\), but `x` \(3, 6, 2\) has 6 "
                                              r"snapshots"):
         mx.read(tmp_path / "short.npz")
+
+
+def test_hdf5_states_stored_variables_by_times_are_read_by_the_times(tmp_path):
+    import h5py
+
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(6, 2))
+    with h5py.File(tmp_path / "nT.h5", "w") as f:
+        f.create_group("a").update(t=0.1 * np.arange(6), x=x.T)
+    assert np.array_equal(mx.read(tmp_path / "nT.h5").x, x)

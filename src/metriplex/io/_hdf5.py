@@ -10,7 +10,8 @@ way users of HDF5 already store them:
 /trajectory_1 ...      any group names; trajectories may have different lengths
 ```
 
-Groups are read in natural order (``run2`` before ``run10``). The integer attribute
+An ``x`` stored variables × times ``(n, T)`` is read as ``(T, n)`` where its ``t`` says so
+(``T != n``). Groups are read in natural order (``run2`` before ``run10``). The integer attribute
 ``trajectory`` on every group gives the ids; without it on all groups, ids are ``0, 1, ...`` in
 that order. ``names`` may sit on the root or on each group (they must then agree); without it
 the variables are called ``x0, x1, ...``.
@@ -128,13 +129,12 @@ def _read_hdf5(f, path: Path, dt: float | None = None) -> Trajectories:
             t = np.arange(len(x)) * dt
         if x.ndim == 1:
             x = x[:, None]
+        if dt is None and x.ndim == 2 and x.shape[1] == len(t) != x.shape[0]:
+            x = x.T  # stored variables x times: the times say which axis is which
         if x.ndim != 2 or x.shape[0] != len(t):
-            hint = (
-                " It looks transposed: write x.T." if x.ndim == 2 and x.shape[1] == len(t) else ""
-            )
             raise MetriplexError(
                 f"dataset `x` in {gw} has shape {x.shape}; with {len(t)} times in `t` it must be "
-                f"({len(t)}, n), one row per time.{hint}"
+                f"({len(t)}, n), one row per time (or (n, {len(t)}))."
             )
         if xs and x.shape[1] != xs[0].shape[1]:
             raise MetriplexError(
