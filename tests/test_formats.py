@@ -632,3 +632,20 @@ def test_hdf5_states_stored_variables_by_times_are_read_by_the_times(tmp_path):
     with h5py.File(tmp_path / "nT.h5", "w") as f:
         f.create_group("a").update(t=0.1 * np.arange(6), x=x.T)
     assert np.array_equal(mx.read(tmp_path / "nT.h5").x, x)
+
+
+def test_hdf5_stacked_states_at_the_root(tmp_path):
+    import h5py
+
+    rng = np.random.default_rng(3)
+    x, t = rng.normal(size=(2, 5, 3)), 0.2 * np.arange(5)
+    with h5py.File(tmp_path / "root.h5", "w") as f:
+        f.update(x=x, t=t)
+    data = mx.read(tmp_path / "root.h5")
+    assert len(data) == 2 and all(np.array_equal(tk, t) and np.array_equal(xk, x[k])
+                                  for k, (tk, xk) in enumerate(data))
+    with h5py.File(tmp_path / "bare.h5", "w") as f:
+        f.update(x=x)
+    assert len(mx.read(tmp_path / "bare.h5", dt=0.5)) == 2
+    with pytest.raises(MetriplexError, match=r"holds `x` at its root and no times `t`: .*--dt"):
+        mx.read(tmp_path / "bare.h5")

@@ -149,3 +149,34 @@ def _text(s) -> str:
 def _h5_reason(e: Exception) -> str:
     msg = str(e).strip() or type(e).__name__
     return msg if len(msg) < 200 else msg[:200] + "..."
+
+
+def stacked_table(arrays: dict, where: str, dt: float | None) -> dict[str, np.ndarray]:
+    """The long table (``trajectory``, ``x`` and, without ``dt``, ``t``) of ``arrays`` that hold
+    ``x`` stacked, without ``trajectory``: ``(T, n)`` is one trajectory, ``(K, T, n)`` K of
+    them, with ``t`` of ``(T,)`` (shared) or ``(K, T)`` (unless ``dt`` replaces it); for the
+    NPZ and HDF5 readers."""
+    x = arrays["x"]
+    if x.ndim not in (2, 3):
+        raise MetriplexError(
+            f"array `x` of {where} is {x.ndim}-D {x.shape}; without `trajectory` it must be one "
+            "trajectory (T, n) or trajectories x snapshots x variables (K, T, n).")
+    xs = x[None] if x.ndim == 2 else x
+    K, T, n = xs.shape
+    out = {"trajectory": np.repeat(np.arange(K), T), "x": xs.reshape(K * T, n)}
+    if dt is None:
+        t = np.asarray(arrays["t"])
+        if t.shape not in ((T,), (K, T)):
+            raise MetriplexError(
+                f"array `t` of {where} is {t.shape}, but `x` {x.shape} has {T} snapshots per "
+                f"trajectory: give t of ({T},) (shared) or ({K}, {T}), or `trajectory` (N,) "
+                "beside t and x of one row per sample (the long table).")
+        out["t"] = np.broadcast_to(t, (K, T)).reshape(-1)
+        back = np.flatnonzero(np.diff(t.reshape(-1, T), axis=1) <= 0) if x.ndim == 2 else []
+        if len(back):  # a long table without its ids, not one trajectory
+            raise MetriplexError(
+                f"{where} lacks the array `trajectory`: without it `t` and `x` {x.shape} are one "
+                f"trajectory, but t does not increase at row {back[0] + 1} ({t[back[0] + 1]!r} "
+                f"after {t[back[0]]!r}). Give `trajectory` (N,), the id of each row's "
+                f"trajectory (the long table). Found {sorted(arrays)}.")
+    return out

@@ -11,7 +11,8 @@ way users of HDF5 already store them:
 ```
 
 An ``x`` stored variables × times ``(n, T)`` is read as ``(T, n)`` where its ``t`` says so
-(``T != n``). Groups are read in natural order (``run2`` before ``run10``). The integer attribute
+(``T != n``). Datasets ``x`` and ``t`` at the root, with no groups, are read as in NPZ: ``x``
+stacked ``(K, T, n)`` or ``(T, n)``, ``t`` of ``(T,)`` or ``(K, T)``. Groups are read in natural order (``run2`` before ``run10``). The integer attribute
 ``trajectory`` on every group gives the ids; without it on all groups, ids are ``0, 1, ...`` in
 that order. ``names`` may sit on the root or on each group (they must then agree); without it
 the variables are called ``x0, x1, ...``.
@@ -26,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import MetriplexError
-from ..data import Trajectories
-from ._checks import _build, _check_file, _h5_reason, _q, _real, _text, _vector
+from ..data import Trajectories, uniform_times
+from ._checks import (_build, _check_file, _h5_reason, _q, _real, _text, _vector,
+                      stacked_table)
 from ._files import atomic_write
 
 FORMAT_NAME = "metriplex-trajectories"
@@ -85,11 +87,21 @@ def _read_hdf5(f, path: Path, dt: float | None = None) -> Trajectories:
     groups, others = [], []
     for name in f:
         (groups if isinstance(f.get(name), h5py.Group) else others).append(name)
+    if not groups and "x" in others and set(others) <= {"x", "t"}:  # x stacked at the root
+        if dt is None and "t" not in others:
+            raise MetriplexError(
+                f"{where} holds `x` at its root and no times `t`: for evenly spaced samples pass "
+                "--dt STEP (read(path, dt=STEP) in Python), or store `t` beside `x`.")
+        table = stacked_table({k: np.asarray(f[k][()]) for k in others}, where, dt)
+        t = table["t"] if dt is None else uniform_times(table["trajectory"], dt)
+        names = _h5_names(f, where) if "names" in f.attrs else ()
+        return _build(path, "HDF5", table["trajectory"], t, table["x"], names)
     if others:
         raise MetriplexError(
             f"{where} holds {sorted(others)} at its root, which are not trajectory groups; the "
-            f"layout is {_HDF5_LAYOUT}. Move each trajectory's `t` and `x` into its own group "
-            "(metriplex.write(\"file.h5\", data) writes this layout)."
+            f"layout is {_HDF5_LAYOUT}, or datasets `x` (K, T, n) and `t` (T,) alone at the "
+            "root. Move each trajectory's `t` and `x` into its own group (metriplex.write("
+            "\"file.h5\", data) writes this layout), or name the root datasets `x` and `t`."
         )
     if not groups:
         raise MetriplexError(

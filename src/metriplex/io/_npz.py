@@ -15,6 +15,7 @@ import numpy as np
 
 from .._errors import MetriplexError
 from ..data import Trajectories, uniform_times
+from ._checks import stacked_table
 from ._files import atomic_write
 
 
@@ -51,41 +52,12 @@ def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
             )
         names = tuple(s.decode() if isinstance(s, bytes) else str(s) for s in raw.reshape(-1))
     if "trajectory" not in arrays:
-        arrays.update(_stacked(arrays, where, dt))
+        arrays.update(stacked_table(arrays, where, dt))
     t = arrays["t"] if dt is None else uniform_times(arrays["trajectory"], dt)
     try:
         return Trajectories(arrays["trajectory"], t, arrays["x"], names)
     except MetriplexError as e:
         raise MetriplexError(f"{where}: {e}") from None
-
-
-def _stacked(arrays: dict, where: str, dt: float | None) -> dict[str, np.ndarray]:
-    """The long table of ``x`` without ``trajectory``: ``(T, n)`` is one trajectory, ``(K, T,
-    n)`` K of them, with ``t`` of ``(T,)`` (shared) or ``(K, T)`` (unless ``dt`` replaces it)."""
-    x = arrays["x"]
-    if x.ndim not in (2, 3):
-        raise MetriplexError(
-            f"array `x` of {where} is {x.ndim}-D {x.shape}; without `trajectory` it must be one "
-            "trajectory (T, n) or trajectories x snapshots x variables (K, T, n).")
-    xs = x[None] if x.ndim == 2 else x
-    K, T, n = xs.shape
-    out = {"trajectory": np.repeat(np.arange(K), T), "x": xs.reshape(K * T, n)}
-    if dt is None:
-        t = np.asarray(arrays["t"])
-        if t.shape not in ((T,), (K, T)):
-            raise MetriplexError(
-                f"array `t` of {where} is {t.shape}, but `x` {x.shape} has {T} snapshots per "
-                f"trajectory: give t of ({T},) (shared) or ({K}, {T}), or `trajectory` (N,) "
-                "beside t and x of one row per sample (the long table).")
-        out["t"] = np.broadcast_to(t, (K, T)).reshape(-1)
-        back = np.flatnonzero(np.diff(t.reshape(-1, T), axis=1) <= 0) if x.ndim == 2 else []
-        if len(back):  # a long table without its ids, not one trajectory
-            raise MetriplexError(
-                f"{where} lacks the array `trajectory`: without it `t` and `x` {x.shape} are one "
-                f"trajectory, but t does not increase at row {back[0] + 1} ({t[back[0] + 1]!r} "
-                f"after {t[back[0]]!r}). Give `trajectory` (N,), the id of each row's "
-                f"trajectory (the long table). Found {sorted(arrays)}.")
-    return out
 
 
 def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
