@@ -222,3 +222,16 @@ def test_the_report_shows_the_worst_trajectory_and_names_it(tmp_path):
         failed, shown = saved["failed_step"], int(saved["shown"])
     assert 0 < np.sum(failed >= 0) < len(failed)
     assert failed[shown] >= 0 and failed[shown] == failed[failed >= 0].min()
+
+
+def test_the_worst_trajectory_is_the_first_to_fail_whatever_the_integer_width():
+    # JAX's int32 failed steps wrapped the int64 sentinel to -1, so a trajectory that had not
+    # failed (the first) was shown as "the worst" beside one that had.
+    from metriplex._solve.rollout import Rollout
+    from metriplex.app._report import worst_trajectory
+
+    for failed in ([-1, -1, 24, -1], [-1, 30, 12, -1]):
+        out = Rollout(np.zeros((4, 3)), np.zeros((4, 3, 1)), np.asarray(failed, np.int32),
+                      np.zeros(4, np.int32))
+        assert worst_trajectory(out, np.zeros((4, 3, 1)), [3] * 4) == int(np.argmin(
+            [f if f >= 0 else 99 for f in failed]))

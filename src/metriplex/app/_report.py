@@ -84,8 +84,8 @@ def worst_trajectory(out: Rollout, xs: np.ndarray, lengths: np.ndarray) -> int:
     """The index of the worst rollout: the one that failed first, if any did, else the one
     with the largest relative L2 error over its trajectory (``xs``, ``lengths``: the padded
     data, as :func:`~metriplex.diagnostics.rollout_data` returns them)."""
-    failed = np.asarray(out.failed_step)
-    if np.any(failed >= 0):
+    failed = np.asarray(out.failed_step, dtype=np.int64)  # int32 from JAX: the sentinel below
+    if np.any(failed >= 0):                                 # would wrap to -1 in it
         return int(np.argmin(np.where(failed >= 0, failed, np.iinfo(np.int64).max)))
     pred = np.asarray(out.xs, dtype=np.float64)
     error = [_relative_error(pred[j, :T], xs[j, :T]) for j, T in enumerate(lengths)]
