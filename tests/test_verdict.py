@@ -477,3 +477,71 @@ def test_a_learned_entropy_is_told_apart_from_a_given_one():
 
     assert _learned(mx.MLPPotential(3, width=4, depth=1, key=jr.key(0)))
     assert not _learned(mx.SumOf((2,))) and not _learned(mx.Known(lambda x: x[0]))
+
+
+def test_a_residual_far_beyond_the_reference_is_not_hidden_by_the_tolerance():
+    # A damped oscillator fitted as conservative left 5.2 % of the rates against the
+    # reference's 0.2 %: ratio 1.7 to the tolerance's floor, "consistent" (verdict audit).
+    from metriplex._verdict_checks import _residual_checks
+    from metriplex.verdict import Thresholds
+
+    th = Thresholds()
+    (_, _, damped), _ = _residual_checks(0.052, 0.002, "", th)
+    assert damped["passed"] is False and "26x the reference's own" in damped["note"]
+    # A short training of exactly GENERIC data: 0.028 against 0.0082 (3.4x) still passes.
+    (_, _, generic), _ = _residual_checks(0.028, 0.0082, "", th)
+    assert generic["passed"] is True
+    # Both under 1 %: what training budgets decide.
+    (_, _, small), _ = _residual_checks(0.009, 0.0005, "", th)
+    assert small["passed"] is True
+
+
+def test_failed_rollouts_excuse_a_misfit_only_where_it_is_not_decisive():
+    from metriplex.verdict import _outcome
+
+    ratio = [{"name": "residual_ratio"}]
+    rollouts = [{"name": "rollout_failures"}]
+    # The misfit alone: not consistent.
+    assert _outcome(ratio, 5.0, True, far=False) == NOT_CONSISTENT
+    # Beside failed rollouts, a modest misfit is no evidence (the rollouts may be the cause)...
+    assert _outcome(ratio + rollouts, 2.2, True, far=False) == CANNOT_TELL
+    # ... but a converged training far beyond the reference is (a damped oscillator in (q, p)
+    # with everything learned: ratio 37, "cannot tell" with the advice to sample more finely).
+    assert _outcome(ratio + rollouts, 37.0, True, far=True) == NOT_CONSISTENT
+    assert _outcome(ratio + rollouts, 37.0, None, far=True) == CANNOT_TELL  # training unknown
+    assert _outcome(ratio + [{"name": "training_converged"}], 37.0, False, far=True) \
+        == CANNOT_TELL
+
+
+def test_the_checks_on_S_and_M_do_not_apply_where_the_friction_never_acts():
+    # A conservative pendulum with --entropy zero was "cannot tell" for |M grad E| of a friction
+    # whose largest eigenvalue was 1e-7; with S learned, for L grad S of an S nothing used.
+    from metriplex._verdict_checks import _structure_checks
+    from metriplex.verdict import Thresholds
+
+    sr = {"null_reasons": {}, "degeneracy_L_gradS_relative": 0.71,
+          "degeneracy_M_gradE_relative": 0.52, "jacobi_residual_relative": 0.0,
+          "friction_min_eigenvalue": 0.0, "friction_max_eigenvalue": 1e-7,
+          "poisson_antisymmetry_relative": 0.0, "temperature_negative_fraction": None,
+          "reversible_share": 1.0}
+    report = {"entropy_production_negative_fraction": 0.48}
+    free = {r["name"]: r for r in _structure_checks(sr, report, Thresholds(), entropy_free=True)}
+    for name in ("degeneracy_L_gradS", "degeneracy_M_gradE", "entropy_production"):
+        assert free[name]["passed"] is None and "friction drives none" in free[name]["note"]
+    assert free["jacobi"]["passed"] is True
+    # A given S keeps them (the user said S is the entropy), and so does an acting friction.
+    given = {r["name"]: r for r in _structure_checks(sr, report, Thresholds())}
+    acting = {r["name"]: r for r in _structure_checks({**sr, "reversible_share": 0.9}, report,
+                                                      Thresholds(), entropy_free=True)}
+    for name in ("degeneracy_L_gradS", "degeneracy_M_gradE", "entropy_production"):
+        assert given[name]["passed"] is False and acting[name]["passed"] is False
+
+
+def test_noise_on_the_states_is_named_where_the_reference_fails():
+    from metriplex._verdict_checks import _residual_checks
+    from metriplex.verdict import Thresholds
+
+    (noisy, _, _), _ = _residual_checks(0.39, 0.39, "", Thresholds(), correlation=-0.49)
+    assert noisy["passed"] is False and "evaluate on every k-th sample" in noisy["note"]
+    (other, _, _), _ = _residual_checks(0.39, 0.39, "", Thresholds(), correlation=0.6)
+    assert "every k-th sample" not in other["note"] and "--verdict-steps" in other["note"]

@@ -80,8 +80,9 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           residual of the reference (four times its power),
                                           where residuals under the tolerance (3% of the
                                           rates) count as the tolerance: below it,
-                                          differences are what training budgets decide
-                                          (not consistent)
+                                          differences are what training budgets decide;
+                                          or more than 1% and 5x the reference's own
+                                          (``far_residual``, ``far_ratio``) (not consistent)
 ``degeneracy_L_gradS``     0.1            :math:`|L\nabla S|/(|L|_F|\nabla S|)` in
                                           standardised coordinates, 0 when exact; an
                                           antisymmetric L reaches at most
@@ -129,10 +130,12 @@ data scale), so none of them depends on the units of time, state, :math:`E` or :
 A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
-Outcome: any failed ``cannot tell`` check among the soundness checks (the first four and
-``reference_residual``) → **cannot tell**; else a failed ``residual_ratio`` → **not
-consistent**; else a failed ``reference_residual_correlation`` or structure check → **cannot
-tell**; else **consistent**. The command line's ``metriplex evaluate --strict`` exits with
+Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range`` or
+``reference_residual`` → **cannot tell**; else a failed ``residual_ratio`` → **not
+consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
+except after a converged training whose residual is far beyond the reference's:
+:func:`~metriplex._verdict_checks.far_beyond`); else any failed check → **cannot tell**;
+else **consistent**. The command line's ``metriplex evaluate --strict`` exits with
 :data:`EXIT_STATUS` of the outcome (0 consistent, 1 not consistent, 3 cannot tell).
 
 With **not consistent**, the report also names what the observed data do under the learned
@@ -159,9 +162,10 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _range_check,
-                              _residual_checks, _violations,
-                              _soundness_checks, _structure_checks)
+                              _residual_checks, _soundness_checks, _structure_checks,
+                              _violations, far_beyond)
 from .data import Trajectories, state_scale, time_scale
+from .structure import ZeroPotential
 
 if TYPE_CHECKING:
     from ._train import History
@@ -194,6 +198,8 @@ class Thresholds:
     rounding: float = 1e-5
     negative_temperatures: float = 0.01
     reversible_share: float = 0.01
+    far_ratio: float = 5.0
+    far_residual: float = 0.01
     step_sensitivity: float = 0.1
     training_range: float = 6.0
 
@@ -216,6 +222,31 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
                       "into L grad E and M grad S (any flow that conserves the learned E can "
                       "be written as L grad E), so such checks fail on GENERIC data too: give "
                       "what is known, such as the entropy variables (--entropy sum:I,J).")
+
+
+def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
+             far: bool) -> str:
+    """The verdict's outcome from its ``failed`` checks (module docstring, *Outcome*); ``far``:
+    the structured model's residual is far beyond the reference's (:func:`far_beyond`)."""
+    # reference_residual_correlation only weakens a "consistent" (below, with the structure
+    # checks): a structured model that leaves much more than the reference is not consistent.
+    # Failed rollouts and a step-dependent prediction make a "consistent" unsound, but beside
+    # a converged training's residual far beyond the reference's (far_beyond) they are
+    # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
+    # conservative: ratio 37, "cannot tell" before).
+    evidence = {"held_out_pairs", "training_converged", "reference_residual", "training_range"}
+    symptoms = {"rollout_failures", "step_sensitivity"}
+    misfit = any(r["name"] == "residual_ratio" for r in failed)
+    if any(r["name"] in evidence for r in failed) or (ratio is None):
+        outcome = CANNOT_TELL
+    elif misfit and ((converged is True and far)
+                     or not any(r["name"] in symptoms for r in failed)):
+        outcome = NOT_CONSISTENT
+    elif failed:
+        outcome = CANNOT_TELL
+    else:
+        outcome = CONSISTENT
+    return outcome
 
 
 def _learned(block: Any) -> bool:
@@ -318,22 +349,12 @@ def verdict(
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
     reasons += compared + _range_check(data, trained_on, th)
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
-    reasons += _structure_checks(sr, report, th)
+    reasons += _structure_checks(sr, report, th, entropy_free=_learned(model.entropy)
+                                 or isinstance(model.entropy, ZeroPotential))
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
-    # reference_residual_correlation only weakens a "consistent" (below, with the structure
-    # checks): a structured model that leaves much more than the reference is not consistent.
-    sound = {"held_out_pairs", "rollout_failures", "training_converged",
-             "reference_residual", "step_sensitivity", "training_range"}
-    if any(r["name"] in sound for r in failed) or (ratio is None):
-        outcome = CANNOT_TELL
-    elif any(r["name"] == "residual_ratio" for r in failed):
-        outcome = NOT_CONSISTENT
-    elif failed:
-        outcome = CANNOT_TELL
-    else:
-        outcome = CONSISTENT
+    outcome = _outcome(failed, ratio, converged, far_beyond(rel_gen, rel_box, th))
 
     # -- what the observed data do under the learned E and S (no fitted field involved) --
     observed = _observed_laws(model, held, d, dtype)
