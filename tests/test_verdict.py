@@ -545,3 +545,15 @@ def test_noise_on_the_states_is_named_where_the_reference_fails():
     assert noisy["passed"] is False and "evaluate on every k-th sample" in noisy["note"]
     (other, _, _), _ = _residual_checks(0.39, 0.39, "", Thresholds(), correlation=0.6)
     assert "every k-th sample" not in other["note"] and "--verdict-steps" in other["note"]
+
+
+def test_a_time_capped_training_is_told_to_take_more_time():
+    from metriplex._verdict_checks import _soundness_checks
+    from metriplex.verdict import Thresholds
+
+    report = {"rollout_failures": 0, "trajectories": 4}
+    for stopped, advice in (("time budget reached (80 s) at step 27900", "--max-minutes"),
+                            ("step budget reached (3000 steps)", "--steps")):
+        r = [c for c in _soundness_checks(report, 4, False, stopped, Thresholds(), held_out=50,
+                                          fraction=0.2) if c["name"] == "training_converged"][0]
+        assert f"train longer ({advice}) or --resume" in r["note"]

@@ -69,7 +69,9 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
         conv_note, conv_pass = f"training converged ({stopped or 'on a plateau'})", True
     else:
         conv_note = (f"training did not converge ({stopped or 'stopped before a plateau'}): "
-                     "the model may still improve; train longer (--steps) or --resume")
+                     "the model may still improve; train longer ("
+                     + ("--max-minutes" if (stopped or "").startswith("time budget")
+                        else "--steps") + ") or --resume")
         conv_pass = False
     reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
                            conv_note))
