@@ -153,14 +153,14 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
     elif ref_pass is False:
         ratio_pass, ratio_note = None, "not judged: the reference fits badly"
     else:
-        ratio_pass = ratio <= th.residual_ratio and not far_beyond(rel_gen, rel_box, th)
+        ratio_pass = ratio <= th.residual_ratio and not _far_beyond(rel_gen, rel_box, th)
         ratio_note = (f"the structured model leaves {_fmt(rel_gen)} of the held-out rates "
                       f"unexplained, {_fmt(ratio)}x the floor (the reference's {_fmt(rel_box)}, "
                       f"or the tolerance {th.tolerance:g} if larger)" + (
                           f", and {_fmt(rel_gen / rel_box)}x the reference's own: beyond "
                           f"{th.far_residual:g} of the rates, more than {th.far_ratio:g}x an "
                           "unconstrained field of the same capacity is no training budget's "
-                          "difference" if far_beyond(rel_gen, rel_box, th) else ""))
+                          "difference" if _far_beyond(rel_gen, rel_box, th) else ""))
     compared = _reason("residual_ratio", ratio, th.residual_ratio, ratio_pass,
                        NOT_CONSISTENT if ratio is not None else CANNOT_TELL, ratio_note)
     # The reference's residual is a floor only where it is noise: a part that is correlated
@@ -204,7 +204,7 @@ NOISE_SIGNATURE = -0.3
 INERT_FRICTION = 1e-6
 
 
-def far_beyond(rel_gen: float | None, rel_box: float | None, th) -> bool:
+def _far_beyond(rel_gen: float | None, rel_box: float | None, th) -> bool:
     """Whether the structured model leaves more than ``th.far_residual`` of the rates and more
     than ``th.far_ratio`` times the reference's residual: under the tolerance's floor a clean
     reference hid a damped oscillator fitted as conservative (5.2 % against 0.2 %, ratio 1.7

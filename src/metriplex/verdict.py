@@ -134,7 +134,7 @@ Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``
 ``reference_residual`` → **cannot tell**; else a failed ``residual_ratio`` → **not
 consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
-:func:`~metriplex._verdict_checks.far_beyond`); else any failed check → **cannot tell**;
+:func:`~metriplex._verdict_checks._far_beyond`); else any failed check → **cannot tell**;
 else **consistent**. The command line's ``metriplex evaluate --strict`` exits with
 :data:`EXIT_STATUS` of the outcome (0 consistent, 1 not consistent, 3 cannot tell).
 
@@ -163,7 +163,7 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _range_check,
                               _residual_checks, _soundness_checks, _structure_checks,
-                              _violations, far_beyond)
+                              _violations, _far_beyond)
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroPotential
 
@@ -227,11 +227,11 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
 def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
              far: bool) -> str:
     """The verdict's outcome from its ``failed`` checks (module docstring, *Outcome*); ``far``:
-    the structured model's residual is far beyond the reference's (:func:`far_beyond`)."""
+    the structured model's residual is far beyond the reference's (``_far_beyond``)."""
     # reference_residual_correlation only weakens a "consistent" (below, with the structure
     # checks): a structured model that leaves much more than the reference is not consistent.
     # Failed rollouts and a step-dependent prediction make a "consistent" unsound, but beside
-    # a converged training's residual far beyond the reference's (far_beyond) they are
+    # a converged training's residual far beyond the reference's (_far_beyond) they are
     # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
     # conservative: ratio 37, "cannot tell" before).
     evidence = {"held_out_pairs", "training_converged", "reference_residual", "training_range"}
@@ -354,7 +354,7 @@ def verdict(
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
-    outcome = _outcome(failed, ratio, converged, far_beyond(rel_gen, rel_box, th))
+    outcome = _outcome(failed, ratio, converged, _far_beyond(rel_gen, rel_box, th))
 
     # -- what the observed data do under the learned E and S (no fitted field involved) --
     observed = _observed_laws(model, held, d, dtype)
