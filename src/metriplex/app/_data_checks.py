@@ -52,9 +52,9 @@ def _names(names) -> str:
     return shown + (f", ... ({len(names)} in all)" if len(names) > 8 else "")
 
 
-def _span(values, unit: str = "") -> str:
+def _span(values) -> str:
     lo, hi = float(np.min(values)), float(np.max(values))
-    return f"{lo:.4g}{unit}" if np.isclose(lo, hi, rtol=1e-6) else f"{lo:.4g} to {hi:.4g}{unit}"
+    return f"{lo:.4g}" if np.isclose(lo, hi, rtol=1e-6) else f"{lo:.4g} to {hi:.4g}"
 
 
 def data_summary(train: Trajectories, valid: Trajectories | None) -> str:
