@@ -557,3 +557,21 @@ def test_a_time_capped_training_is_told_to_take_more_time():
         r = [c for c in _soundness_checks(report, 4, False, stopped, Thresholds(), held_out=50,
                                           fraction=0.2) if c["name"] == "training_converged"][0]
         assert f"train longer ({advice}) or --resume" in r["note"]
+
+
+def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():
+    # Data whose entropy's sign was flipped were told to "add the variable that takes" the
+    # energy, which they hold already (verdict audit).
+    from metriplex.verdict import GIVEN_ENTROPY_FALLS, MISSING_VARIABLE
+
+    system = systems.get_system("oscillator-bath")
+    data = systems.generate(system, trajectories=8, steps=40, seed=3)
+    x = data.x.copy()
+    x[:, 2] *= -1.0
+    flipped = mx.Trajectories(data.trajectory, data.t, x, data.names)
+    report = mx.evaluate(system.model, flipped, scheme=mx.RK4())
+    v = verdict(system.model, flipped, report=report, converged=True,
+                reference=train_reference(flipped, steps=2000, width=16))
+    assert v["outcome"] == NOT_CONSISTENT, v["statement"]
+    assert any(w.startswith("second law") for w in v["violations"])
+    assert v["statement"].endswith(GIVEN_ENTROPY_FALLS + " " + MISSING_VARIABLE)

@@ -19,6 +19,33 @@ NOT_CONSISTENT = "not consistent"
 CANNOT_TELL = "cannot tell"
 
 
+#: What a NOT-consistent statement adds: the two common causes, a model fitted to other data
+#: (a user's test set from other parameters) and, on data from a real system, a variable
+#: missing (a damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
+MISSING_VARIABLE = ("If the model was trained on other data than these (another system, other "
+                    "parameters), train on these. Otherwise, a system that loses energy to, or "
+                    "gains it from, something outside the data (heat in a medium, a drive) has "
+                    "no GENERIC model in these variables: add the variable that takes it (an "
+                    "entropy, a temperature, a bath's energy), if it was recorded.")
+
+
+#: The checks that fail where a learned S leaves the split of the motion open, and what a
+#: "cannot tell" then adds: GENERIC data with nothing given got the same failed checks as
+#: data that are not GENERIC (found by a new-user check of the verdict).
+_SPLIT_CHECKS = {"degeneracy_L_gradS", "jacobi", "entropy_production", "reversible_share"}
+UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the motion splits "
+                      "into L grad E and M grad S (any flow that conserves the learned E can "
+                      "be written as L grad E), so such checks fail on GENERIC data too: give "
+                      "what is known, such as the entropy variables (--entropy sum:I,J).")
+
+
+#: What a NOT-consistent statement adds first where S is given and the observed data decrease
+#: it: the flaw is in the entropy given, not a variable missing (found by a check of the verdict
+#: on data whose entropy's sign was flipped).
+GIVEN_ENTROPY_FALLS = ("The entropy given (--entropy sum:...) decreases along the observed data: "
+                       "check its sign, and that it is an entropy of this system.")
+
+
 def _reason(name, value, threshold, passed, effect, note) -> dict[str, Any]:
     return {"name": name, "value": value, "threshold": threshold, "passed": passed,
             "effect": effect, "note": note}

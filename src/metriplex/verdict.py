@@ -161,7 +161,8 @@ from ._model import GenericModel, float_dtype, weights
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
-from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _fmt, _range_check,
+from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
+                              NOT_CONSISTENT, UNIDENTIFIED_SPLIT, _SPLIT_CHECKS, _fmt, _range_check,
                               _residual_checks, _soundness_checks, _structure_checks,
                               _violations, _far_beyond)
 from .data import Trajectories, state_scale, time_scale
@@ -202,26 +203,6 @@ class Thresholds:
     far_residual: float = 0.01
     step_sensitivity: float = 0.1
     training_range: float = 6.0
-
-
-#: What a NOT-consistent statement adds: the two common causes, a model fitted to other data
-#: (a user's test set from other parameters) and, on data from a real system, a variable
-#: missing (a damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
-MISSING_VARIABLE = ("If the model was trained on other data than these (another system, other "
-                    "parameters), train on these. Otherwise, a system that loses energy to, or "
-                    "gains it from, something outside the data (heat in a medium, a drive) has "
-                    "no GENERIC model in these variables: add the variable that takes it (an "
-                    "entropy, a temperature, a bath's energy), if it was recorded.")
-
-
-#: The checks that fail where a learned S leaves the split of the motion open, and what a
-#: "cannot tell" then adds: GENERIC data with nothing given got the same failed checks as
-#: data that are not GENERIC (found by a new-user check of the verdict).
-_SPLIT_CHECKS = {"degeneracy_L_gradS", "jacobi", "entropy_production", "reversible_share"}
-UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the motion splits "
-                      "into L grad E and M grad S (any flow that conserves the learned E can "
-                      "be written as L grad E), so such checks fail on GENERIC data too: give "
-                      "what is known, such as the entropy variables (--entropy sum:I,J).")
 
 
 def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
@@ -349,8 +330,8 @@ def verdict(
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
     reasons += compared + _range_check(data, trained_on, th)
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
-    reasons += _structure_checks(sr, report, th, entropy_free=_learned(model.entropy)
-                                 or isinstance(model.entropy, ZeroPotential))
+    entropy_free = _learned(model.entropy) or isinstance(model.entropy, ZeroPotential)
+    reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
@@ -374,7 +355,9 @@ def verdict(
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
-                                                            else "") + ". " + MISSING_VARIABLE)
+                                                            else "") + ". " + (
+                         GIVEN_ENTROPY_FALLS + " " if any(w.startswith("second law") for w in laws)
+                         and not entropy_free else "") + MISSING_VARIABLE)
     else:
         statement = ("cannot tell whether the data are consistent with GENERIC: "
                      + "; ".join(_said(r) for r in failed) + ".")
