@@ -98,7 +98,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     """Train a model on ``args.data`` into the run folder ``--out`` (``metriplex train``), evaluate
     it on the validation trajectories and print a summary; the exit status 130 when the training was
     interrupted, else ``None``."""
-    from ._data_checks import operators_note
+    from ._data_checks import operators_note, split_in_time
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from ._repeats import trainings_note
@@ -140,7 +140,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             parts, config, out, overwrite=args.overwrite, resume=args.resume,
             progress=not args.quiet)
         target = valid if valid is not None else train
-        split_in_time = valid is not None and set(valid.ids) == set(train.ids)
+        in_time = split_in_time(train, valid)
         # The evaluation holds only what it rolls out (large data: memory). The loss figure
         # leaves a reference cycle through matplotlib's frames that holds the training's
         # locals, the training part among them, until the collector runs: collect now.
@@ -152,7 +152,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
                                progress=not args.quiet, step_check=False)
         metrics["train_seconds"] = seconds
         metrics["evaluated_on"] = (
-            "training data" if valid is None else "validation trajectories" if not split_in_time
+            "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
         metrics["stopped"] = history.stopped
         write_json(out / "metrics.json", metrics)

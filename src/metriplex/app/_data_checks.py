@@ -57,12 +57,18 @@ def _span(values) -> str:
     return f"{lo:.4g}" if np.isclose(lo, hi, rtol=1e-6) else f"{lo:.4g} to {hi:.4g}"
 
 
+def split_in_time(train: Trajectories, valid: Trajectories | None) -> bool:
+    """Whether the validation part is the end of the training trajectories themselves (a
+    trajectory split in time), not trajectories of its own."""
+    return valid is not None and set(valid.ids) == set(train.ids)
+
+
 def data_summary(train: Trajectories, valid: Trajectories | None) -> str:
     """One line: trajectories (to train / to validate), samples each, variables and time steps."""
     k = len(train.ids)
     parts = [train] if valid is None else [train, valid]
     lengths = np.concatenate([p.lengths() for p in parts])
-    if valid is not None and set(valid.ids) == set(train.ids):
+    if split_in_time(train, valid):
         split = (f"{k} trajector{'y' if k == 1 else 'ies'} split in time "
                  f"({_span(train.lengths())} samples to train, the last "
                  f"{_span(valid.lengths())} to validate)")

@@ -130,9 +130,9 @@ def structure_warnings(metrics: dict) -> list[str]:
                    f"states: {cause}, so this S is not an entropy of the model's flow. "
                    "Where L and S are learned, L grad S = 0 is a penalty by default and "
                    "--degeneracy exact makes it exact with --poisson neural or casimir3 (it "
-                   "can cost accuracy, see docs/zoo.md); where L is given, S must be one of its Casimirs (by "
-                   "default S is then learned of the variables L leaves free, where L has "
-                   "such coordinates; not with --degeneracy soft)."
+                   "can cost accuracy, see docs/zoo.md); where L is given, S must be one of its "
+                   "Casimirs (by default S is then learned of the variables L leaves free, "
+                   "where L has such coordinates; not with --degeneracy soft)."
                    + _idle_friction(metrics.get("reversible_share")))
     share = metrics.get("reversible_share")
     if share is not None and share < REVERSIBLE_SHARE:
@@ -190,7 +190,7 @@ def training_range_warning(units: dict, data: Trajectories) -> list[str]:
     if not far:
         return []
     tid, d, var = max(far, key=lambda f: f[1])
-    ids = ", ".join(str(f[0]) for f in far[:10]) + (", ..." if len(far) > 10 else "")
+    ids = listing([str(f[0]) for f in far], 10, sep=", ")
     return [f"warning: {len(far)} of {len(data)} trajectories ({ids}) reach states the model "
             f"was never trained on ({data.names[var]} at {d:.3g} training standard deviations "
             f"from its training mean, in trajectory {tid}): their rollout errors say how the "
@@ -261,9 +261,9 @@ def outlier_warning(data: Trajectories, what: str = "training data") -> list[str
             ] if found else []
 
 
-def listing(found: list[str], most: int) -> str:
-    """The first ``most`` of ``found``, joined by semicolons, with "..." for the rest."""
-    return "; ".join(found[:most]) + ("; ..." if len(found) > most else "")
+def listing(found: list[str], most: int, sep: str = "; ") -> str:
+    """The first ``most`` of ``found``, joined by ``sep``, with "..." for the rest."""
+    return sep.join(found[:most]) + (sep + "..." if len(found) > most else "")
 
 
 def trained_on(run: dict, data: Trajectories) -> list[int]:

@@ -12,7 +12,9 @@ way users of HDF5 already store them:
 
 An ``x`` stored variables × times ``(n, T)`` is read as ``(T, n)`` where its ``t`` says so
 (``T != n``). Datasets ``x`` and ``t`` at the root, with no groups, are read as in NPZ: ``x``
-stacked ``(K, T, n)`` or ``(T, n)``, ``t`` of ``(T,)`` or ``(K, T)``. Groups are read in natural order (``run2`` before ``run10``). The integer attribute
+stacked ``(K, T, n)`` or ``(T, n)``, ``t`` of ``(T,)`` or ``(K, T)``.
+
+Groups are read in natural order (``run2`` before ``run10``). The integer attribute
 ``trajectory`` on every group gives the ids; without it on all groups, ids are ``0, 1, ...`` in
 that order. ``names`` may sit on the root or on each group (they must then agree); without it
 the variables are called ``x0, x1, ...``.

@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import MetriplexError
-from ..data import Trajectories
+from ..data import Trajectories, uniform_times
+from ._checks import stacked_table
 
 
 def read_npy(path: Path, *, dt: float | None = None) -> Trajectories:
@@ -37,7 +38,5 @@ def read_npy(path: Path, *, dt: float | None = None) -> Trajectories:
             "STEP (read(path, dt=STEP) in Python), the time between snapshots; or store the "
             "times with the states as .npz (trajectory, t, x)."
         )
-    xs = a[None] if a.ndim == 2 else a
-    K, T, n = xs.shape
-    return Trajectories(np.repeat(np.arange(K), T), np.tile(dt * np.arange(T), K),
-                        xs.reshape(K * T, n))
+    table = stacked_table({"x": a}, where, dt)
+    return Trajectories(table["trajectory"], uniform_times(table["trajectory"], dt), table["x"])
