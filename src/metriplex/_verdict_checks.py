@@ -172,7 +172,8 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
                             "step, or too short a reference training: raise --verdict-steps)")))
     reference = _reason("reference_residual", rel_box, th.reference_residual, ref_pass,
                         CANNOT_TELL, ref_note)
-    floor = max(rel_box if rel_box is not None else 0.0, th.tolerance)
+    floor, far = max(rel_box if rel_box is not None else 0.0, th.tolerance), \
+        _far_beyond(rel_gen, rel_box, th)
     ratio = None if rel_gen is None else rel_gen / floor
     if ratio is None:
         ratio_pass, ratio_note = False, (
@@ -180,14 +181,14 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
     elif ref_pass is False:
         ratio_pass, ratio_note = None, "not judged: the reference fits badly"
     else:
-        ratio_pass = ratio <= th.residual_ratio and not _far_beyond(rel_gen, rel_box, th)
+        ratio_pass = ratio <= th.residual_ratio and not far
         ratio_note = (f"the structured model leaves {_fmt(rel_gen)} of the held-out rates "
                       f"unexplained, {_fmt(ratio)}x the floor (the reference's {_fmt(rel_box)}, "
                       f"or the tolerance {th.tolerance:g} if larger)" + (
                           f", and {_fmt(rel_gen / rel_box)}x the reference's own: beyond "
                           f"{th.far_residual:g} of the rates, more than {th.far_ratio:g}x an "
                           "unconstrained field of the same capacity is no training budget's "
-                          "difference" if _far_beyond(rel_gen, rel_box, th) else ""))
+                          "difference" if far else ""))
     compared = _reason("residual_ratio", ratio, th.residual_ratio, ratio_pass,
                        NOT_CONSISTENT if ratio is not None else CANNOT_TELL, ratio_note)
     # The reference's residual is a floor only where it is noise: a part that is correlated
