@@ -624,6 +624,33 @@ def test_npz_stacked_states_without_trajectory_ids(tmp_path):
         mx.read(tmp_path / "short.npz")
 
 
+def test_npz_with_its_own_time_step_and_states_under_another_name(tmp_path):
+    # np.savez(f, X=(K, T, n), dt=0.1), as published data are saved: the step was refused as an
+    # unknown array, and the missing `x` was explained by the long table alone.
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(3, 6, 2))
+    np.savez(tmp_path / "step.npz", x=x, dt=0.25)
+    data = mx.read(tmp_path / "step.npz")
+    assert len(data) == 3 and np.array_equal(next(iter(data))[0], 0.25 * np.arange(6))
+    with pytest.raises(MetriplexError, match=r"--dt 0.5 would replace the file's own times"):
+        mx.read(tmp_path / "step.npz", dt=0.5)  # the file's step is its times
+    np.savez(tmp_path / "both.npz", x=x, t=0.25 * np.arange(6), dt=0.25)
+    assert np.array_equal(mx.read(tmp_path / "both.npz").x, mx.read(tmp_path / "step.npz").x)
+    np.savez(tmp_path / "clash.npz", x=x, t=0.25 * np.arange(6), dt=0.5)
+    with pytest.raises(MetriplexError, match=r"time step `dt`=0.5 .* disagrees with its times "
+                                             r"`t`, which step by 0.25 at row 1"):
+        mx.read(tmp_path / "clash.npz")
+    np.savez(tmp_path / "steps.npz", x=x, dt=[0.1, 0.2])
+    with pytest.raises(MetriplexError, match=r"`dt` .* must be one positive finite number; "
+                                             r"got .*\[0.1, 0.2\]"):
+        mx.read(tmp_path / "steps.npz")
+    np.savez(tmp_path / "X.npz", X=x, dt=0.25)
+    with pytest.raises(MetriplexError, match=r"lacks the array\(s\) \['trajectory', 'x'\].*"
+                                             r"\(K, T, n\).*`X` 3×6×2 may hold the states: save "
+                                             r"it as `x`"):
+        mx.read(tmp_path / "X.npz")
+
+
 def test_hdf5_states_stored_variables_by_times_are_read_by_the_times(tmp_path):
     import h5py
 

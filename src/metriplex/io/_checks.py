@@ -151,6 +151,43 @@ def _h5_reason(e: Exception) -> str:
     return msg if len(msg) < 200 else msg[:200] + "..."
 
 
+#: The names a file's time step goes by (a scalar, or one per trajectory in .mat files).
+STEP_KEYS = ("dt", "Dt", "DT", "delta_t")
+
+
+def file_step(arrays: dict, where: str) -> tuple[str | None, float | None]:
+    """``(name, value)`` of the one scalar time step among ``arrays`` (named one of
+    :data:`STEP_KEYS`), ``(None, None)`` where there is none; refused where it is not one
+    positive finite number, or where two names give one."""
+    keys = [k for k in STEP_KEYS if k in arrays]
+    if not keys:
+        return None, None
+    if len(keys) > 1:
+        raise MetriplexError(f"{where} holds the time steps {keys}; keep one of them.")
+    raw = np.asarray(arrays[keys[0]])
+    if raw.size != 1 or raw.dtype.kind not in "iuf" or not np.isfinite(raw).all() \
+            or float(raw.reshape(-1)[0]) <= 0:
+        raise MetriplexError(
+            f"time step `{keys[0]}` of {where} must be one positive finite number; got "
+            f"{_describe(raw)} {raw.reshape(-1)[:5].tolist()}. Save the step as a number (np.savez(..., dt=0.1)), or remove it "
+            "and pass --dt STEP.")
+    return keys[0], float(raw.reshape(-1)[0])
+
+
+def steps_agree(t: np.ndarray, trajectory: np.ndarray, step: float, name: str,
+                where: str) -> None:
+    """Refuse times ``t`` (one per row of ``trajectory``) whose steps differ from the file's
+    ``step`` (named ``name``) beyond 0.1 %: one of the two is wrong."""
+    same = trajectory[1:] == trajectory[:-1]
+    steps = np.diff(np.asarray(t, np.float64))[same]
+    bad = np.flatnonzero(np.abs(steps - step) > 1e-3 * step)
+    if len(bad):
+        raise MetriplexError(
+            f"time step `{name}`={step!r} of {where} disagrees with its times `t`, which step by "
+            f"{float(steps[bad[0]])!r} at row {int(np.flatnonzero(same)[bad[0]]) + 1}. Remove the "
+            "wrong one, or pass --dt STEP to use the grid t = k*STEP instead of both.")
+
+
 def stacked_table(arrays: dict, where: str, dt: float | None) -> dict[str, np.ndarray]:
     """The long table (``trajectory``, ``x`` and, without ``dt``, ``t``) of ``arrays`` that hold
     ``x`` stacked, without ``trajectory``: ``(T, n)`` is one trajectory, ``(K, T, n)`` K of

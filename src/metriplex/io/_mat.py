@@ -38,13 +38,13 @@ import numpy as np
 
 from .._errors import MetriplexError
 from ..data import Trajectories, uniform_times
-from ._checks import _build, _check_file, _found, _q, _real, _shape, _strings, _vector
+from ._checks import (STEP_KEYS, _build, _check_file, _found, _q, _real, _shape, _strings,
+                      _vector)
 from ._files import atomic_write
 from ._mat_load import _load_mat
 
 STATE_KEYS = ("Z", "z", "X", "x", "data", "states", "yout")
 TIME_KEYS = ("t_vec", "tvec", "t", "time", "times", "ts", "tout")
-STEP_KEYS = ("dt", "Dt", "DT", "delta_t")
 NAME_KEYS = ("names", "var_names", "variables", "labels")
 OPERATOR_KEYS = ("L", "M")
 

@@ -1,8 +1,9 @@
 """The long table as NPZ, the native format: arrays ``trajectory`` (N,), ``t`` (N,), ``x``
 (N, n) and optionally ``names`` (n,) (docs/design.md, 'Trajectory data'). Without
 ``trajectory``, ``x`` may also be stacked: one trajectory ``(T, n)`` or trajectories ×
-snapshots × variables ``(K, T, n)``, with ``t`` of ``(T,)`` or ``(K, T)``. Nothing is
-unpickled.
+snapshots × variables ``(K, T, n)``, with ``t`` of ``(T,)`` or ``(K, T)``. A scalar time step
+(``dt``, ``Dt``, ``DT`` or ``delta_t``) may replace ``t`` (times ``0, dt, 2 dt, ...``) or stand
+beside it (then it must match its steps). Nothing is unpickled.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import numpy as np
 
 from .._errors import MetriplexError
 from ..data import Trajectories, uniform_times
-from ._checks import stacked_table
+from ._checks import STEP_KEYS, _shape, file_step, stacked_table, steps_agree
 from ._files import atomic_write
 
 
@@ -41,7 +42,10 @@ def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
                 "names=...)."
             )
         with z:
-            arrays = _npz_arrays(z, where, need_t=dt is None)
+            arrays = _npz_arrays(z, where, need_t=dt is None and not set(STEP_KEYS) & set(z.files))
+    step_key, step = file_step(arrays, where)
+    if dt is None and step is not None and "t" not in arrays:
+        dt = step  # the file's own step: times 0, dt, 2 dt, ...
     names = ()
     if "names" in arrays:
         raw = arrays["names"]
@@ -54,6 +58,9 @@ def read_npz(path: Path, *, dt: float | None = None) -> Trajectories:
     if "trajectory" not in arrays:
         arrays.update(stacked_table(arrays, where, dt))
     t = arrays["t"] if dt is None else uniform_times(arrays["trajectory"], dt)
+    if step is not None and dt is None:
+        steps_agree(np.asarray(t).reshape(-1), np.asarray(arrays["trajectory"]).reshape(-1),
+                    step, step_key, where)
     try:
         return Trajectories(arrays["trajectory"], t, arrays["x"], names)
     except MetriplexError as e:
@@ -70,10 +77,11 @@ def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
         raise MetriplexError(
             f"{where} lacks the array(s) {missing}; the long table needs `trajectory` (N,), "
             f"`t` (N,) and `x` (N, n), optionally `names` (n,). Found {found}."
-            + (" For evenly spaced samples without times, pass --dt STEP (read(path, "
-               "dt=STEP) in Python)." if missing == ["t"] else "")
+            + (" For evenly spaced samples without times, save the step beside `x` (dt=STEP) "
+               "or pass --dt STEP (read(path, dt=STEP) in Python)." if missing == ["t"] else "")
+            + (_states_hint(z, found) if "x" in missing else "")
         )
-    unknown = [k for k in found if k not in ("trajectory", "t", "x", "names")]
+    unknown = [k for k in found if k not in ("trajectory", "t", "x", "names", *STEP_KEYS)]
     if unknown:
         raise MetriplexError(
             f"{where} holds unknown array(s) {unknown}; the long table holds only "
@@ -96,6 +104,22 @@ def _npz_arrays(z, where: str, need_t: bool = True) -> dict[str, np.ndarray]:
                 "truncated. Write it again."
             ) from None
     return arrays
+
+
+def _states_hint(z, found: list[str]) -> str:
+    """Where ``x`` is missing: the stacked layouts, and the arrays that may hold the states."""
+    def shape(k):
+        try:  # the header alone: a pickled or damaged array is reported when it is read
+            return z[k].shape if z[k].dtype.kind in "iuf" else None
+        except Exception:
+            return None
+    maybe = [(k, sh) for k in found if k not in ("t", "trajectory")
+             and (sh := shape(k)) is not None and len(sh) in (2, 3)]
+    return (" Without `trajectory`, `x` may also be stacked: one trajectory (T, n) or "
+            "trajectories x snapshots x variables (K, T, n), with `t` (T,) or a step `dt`"
+            + (f"; {', '.join(f'`{k}` {_shape(np.empty(sh))}' for k, sh in maybe)} may hold "
+               f"the states: save it as `x` (z = np.load(path); np.savez(new_path, "
+               f"x=z['{maybe[0][0]}'], ...))" if maybe else "") + ".")
 
 
 def write_npz(path: str | os.PathLike, data: Trajectories) -> None:
