@@ -361,6 +361,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", default=",".join(CASES), help="comma list of " + ", ".join(CASES))
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None, help="write the rows to this JSON file")
+    ap.add_argument("--verdict", action="store_true",
+                    help="also give each trained model evaluate's verdict on the test data")
     args = ap.parse_args(argv)
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
@@ -373,7 +375,7 @@ def main(argv=None) -> int:
     for name in names:
         case = CASES[name]
         row = zoo.run_case(case, {}, Path(tempfile.mkdtemp()), seed=args.seed,
-                           with_black_box=True)
+                           with_black_box=True, with_verdict=args.verdict)
         row["truth_cn_standardised"] = truth_error(case, args.seed)
         rows.append(row)
         box = row["black_box"]
@@ -381,6 +383,9 @@ def main(argv=None) -> int:
               f"{row['failed']}/{row['test_trajectories']} | {box['standardised']:.3g} "
               f"({box['failed']} failed) | {row['truth_cn_standardised']:.3g} | "
               f"{row['train_seconds']:.0f} |", flush=True)
+        if row["verdict"] is not None:
+            v = row["verdict"]
+            print(f"  verdict: {v['outcome']}: {v['statement']}", flush=True)
     if args.out:
         Path(args.out).write_text(json.dumps(rows, indent=1, default=str))
     return 0

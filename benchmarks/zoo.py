@@ -18,7 +18,13 @@ python benchmarks/zoo.py --cases oscillator-bath,heat-exchange --set lr=1e-2
 python benchmarks/zoo.py --out zoo.json          # also write the rows as JSON
 python benchmarks/zoo.py --black-box             # also an unconstrained field, for comparison
 python benchmarks/zoo.py --cases thermoelastic-chain --trajectories 96   # more training data
+python benchmarks/zoo.py --verdict               # also evaluate's verdict on the test data
 ```
+
+``--verdict`` also gives each case's trained model, on its unseen test data, the verdict that
+``metriplex evaluate`` gives (:func:`metriplex.verdict.verdict`, with the training's history
+and units): every zoo system is GENERIC, so "not consistent" there is a false alarm, and a
+"cannot tell" says which evidence was short.
 
 ``--black-box`` also trains, on the same training data and split, an unconstrained vector field
 (:class:`metriplex.verdict.BlackBoxModel`, an MLP of the same width and depth as the GENERIC
@@ -168,11 +174,28 @@ def train_and_test(train, test, config: RunConfig, out: Path,
             "standardised": standardised_error(model, test, scheme, rollout)[0]}
 
 
+def verdict_row(run: dict, test, config: RunConfig) -> dict:
+    """``metriplex evaluate``'s verdict on ``test`` for a :func:`train_and_test` result, in
+    brief: the outcome, the residual ratio and residuals, and the checks that failed."""
+    from metriplex.app._warnings import trained_units
+    from metriplex.verdict import verdict
+
+    v = verdict(run["model"], test, report=run["report"], history=run["history"],
+                scheme=scheme_from_name(config.scheme), width=config.width, depth=config.depth,
+                learning_rate=config.lr, batch_size=config.batch_size,
+                trained_on=trained_units(run["header"].get("units") or {}))
+    return {"outcome": v["outcome"], "ratio": v["ratio"],
+            "generic": v["residual_generic_relative"], "black_box": v["residual_black_box_relative"],
+            "failed": [r["name"] for r in v["reasons"] if r["passed"] is False],
+            "statement": v["statement"]}
+
+
 def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
              with_black_box: bool = False, trajectories: int | None = None,
-             horizon: float | None = None) -> dict:
+             horizon: float | None = None, with_verdict: bool = False) -> dict:
     """Train and test one zoo case (or a case built like one) with the defaults, ``overrides``
-    and its flags; ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``)."""
+    and its flags; ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``);
+    ``with_verdict``: also evaluate's verdict on the test data (:func:`verdict_row`)."""
     system = case.system
     trajectories = case.trajectories if trajectories is None else trajectories
     t0 = time.perf_counter()
@@ -221,6 +244,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "data_seconds": gen_seconds,
         "overrides": overrides,
         "black_box": black_box(train, test, config) if with_black_box else None,
+        "verdict": verdict_row(run, test, config) if with_verdict else None,
     }
 
 
@@ -286,6 +310,12 @@ def print_table(rows: list[dict], file=sys.stdout) -> None:
         if r.get("constant_drift") is not None:
             print(f"\n{r['system']}: a variable constant along every test trajectory moves by up "
                   f"to {r['constant_drift']:.2e} standard deviations in its rollouts.", file=file)
+    for r in rows:
+        v = r.get("verdict")
+        if v is not None:
+            ratio = "-" if v["ratio"] is None else f"{v['ratio']:.2g}"
+            print(f"{r['system']}: verdict {v['outcome']} (ratio {ratio}; failed: "
+                  f"{', '.join(v['failed']) or 'none'})", file=file)
     print(f"\n{met} of {len(rows)} cases meet rel. L2 <= {BAR:g} (plain and standardised) with "
           "0 failed rollouts.", file=file)
 
@@ -305,6 +335,8 @@ def main(argv=None) -> int:
                         "validation split is taken from them)")
     p.add_argument("--black-box", action="store_true",
                    help="also train an unconstrained field on the same data, for comparison")
+    p.add_argument("--verdict", action="store_true",
+                   help="also give each trained model evaluate's verdict on the test data")
     args = p.parse_args(argv)
     overrides = parse_overrides(args.set)
     names = args.cases.split(",") if args.cases else list(ZOO)
@@ -322,7 +354,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             row = run_case(case, overrides, Path(tmp), seed=args.seed,
-                           with_black_box=args.black_box, trajectories=args.trajectories)
+                           with_black_box=args.black_box, trajectories=args.trajectories,
+                           with_verdict=args.verdict)
             rows.append(row)
             print(f"  {row['system']}: rel. L2 {_fmt(row['rel_l2'])}, standardised "
                   f"{_fmt(row['rel_l2_standardised'])}, failed {row['failed']}, "
