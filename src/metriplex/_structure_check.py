@@ -8,14 +8,16 @@ re-exports it. Every rollout of the diagnostics stays in :mod:`metriplex.diagnos
 
 from __future__ import annotations
 
+from typing import Any
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._precision import in_full_precision
-from ._model import GenericModel, float_dtype
-from .structure import SumOf
+from ._model import GenericModel, float_dtype, weights
+from .structure import SumOf, ZeroFriction, ZeroPoisson, ZeroPotential
 
 _TINY = 1e-300
 
@@ -119,6 +121,7 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     spread = np.std(x, axis=0)
     d_share = d if scale is not None else np.where(spread > 0, spread, 1.0)
     out.update(_temperatures(model, gE, d_share, null_reasons))
+    out["identified"] = identified(model)
     out["reversible_share"] = _reversible_share(L, M, gE, gS, d_share, nL, null_reasons)
     out["null_reasons"] = null_reasons
     return out
@@ -147,8 +150,12 @@ def _temperatures(model: GenericModel, gE: np.ndarray, d: np.ndarray,
     keys = ("temperature_negative_fraction", "temperature_min", "temperature_share")
     if not isinstance(model.entropy, SumOf):
         for k in keys:
-            null_reasons[k] = ("S is not a sum of entropy variables (--entropy sum:...): the "
-                               "temperatures dE/ds_i are not defined in these coordinates")
+            null_reasons[k] = (
+                "S is learned, so the temperatures are not determined: the data fix S only up "
+                "to an increasing function of itself, and dE/dS changes with it" if weights(
+                    model.entropy) else
+                "S is not a sum of entropy variables (--entropy sum:...): the temperatures "
+                "dE/ds_i are not defined in these coordinates")
         return dict.fromkeys(keys)
     idx = list(model.entropy.indices)
     T = gE[:, idx]
@@ -178,3 +185,62 @@ def _jacobi_parts(model: GenericModel, xs):
         return T + jnp.transpose(T, (1, 2, 0)) + jnp.transpose(T, (2, 0, 1)), T
 
     return jax.vmap(one)(xs)
+
+
+#: What :func:`identified` says of E, S and the temperatures, by the gauge each is fixed up to.
+IDENTIFIED = {
+    "energy": {
+        "constant": "E up to an added constant",
+        "factor": "E up to a factor and an added constant (L/a with a*E gives the same flow)",
+        "function": "E only up to a function of itself, F(E): with L = 0 it enters the flow "
+                    "only through M grad E = 0, so its scale, shape and sign are not determined",
+        "none": "E not at all: L = 0 and M = 0, so the flow does not use it",
+    },
+    "entropy": {
+        "given": "S is given",
+        "zero": "S = 0 (no irreversible part)",
+        "function": "S only up to an increasing function of itself, G(S) (with M/G'(S) the "
+                    "flow is the same): where it grows, not its scale or shape",
+    },
+    "temperatures": {
+        "determined": "the temperatures dE/ds_i where heat flows",
+        "factor": "the temperatures dE/ds_i up to E's factor",
+        "ratios": "only the ratios of the temperatures dE/ds_i: their common scale and sign "
+                  "are free (-E gives the same flow)",
+        "none": "no temperatures dE/dS: they change with S's G",
+    },
+}
+
+
+def identified(model: GenericModel) -> dict[str, Any]:
+    r"""What the observed flow :math:`L\nabla E + M\nabla S` determines of the model's E, S
+    and temperatures, from which blocks are given and which learned: the gauge each is fixed
+    up to by the structure (``energy``, ``entropy``, ``temperatures``: keys of
+    :data:`IDENTIFIED`; ``temperatures`` is ``None`` where S is neither a sum of entropy
+    variables nor learned), the blocks that are ``learned`` (of "E", "S", "L", "M"), and
+    ``statement``, one sentence of what the data determine of the learned ones.
+
+    A given L fixes E up to a constant (:math:`L\nabla E` must match); a learned L leaves
+    :math:`(L/a, aE)`; with :math:`L = 0`, E enters only through :math:`M\nabla E = 0`, which
+    any :math:`F(E)` satisfies. A learned S is fixed only up to an increasing :math:`G(S)`
+    (:math:`L\nabla G(S) = 0` still, and :math:`M/G'` keeps :math:`M\nabla S`), so
+    :math:`\partial E/\partial S` is not determined. These are properties of the structure,
+    not of a training: no amount of data fixes them."""
+    learned = [k for k, block in (("E", model.energy), ("S", model.entropy),
+                                  ("L", model.poisson), ("M", model.friction)) if weights(block)]
+    if isinstance(model.poisson, ZeroPoisson):
+        energy = "none" if isinstance(model.friction, ZeroFriction) else "function"
+    else:
+        energy = "factor" if "L" in learned else "constant"
+    if isinstance(model.entropy, ZeroPotential):
+        entropy = "zero"
+    else:
+        entropy = "function" if "S" in learned else "given"
+    temperatures = ("none" if entropy == "function" else None
+                    if not isinstance(model.entropy, SumOf) else
+                    {"constant": "determined", "factor": "factor"}.get(energy, "ratios"))
+    parts = [IDENTIFIED["energy"][energy] if "E" in learned else "E is given",
+             IDENTIFIED["entropy"][entropy]] + (
+        [IDENTIFIED["temperatures"][temperatures]] if temperatures and "E" in learned else [])
+    return {"energy": energy, "entropy": entropy, "temperatures": temperatures,
+            "learned": learned, "statement": "what the data determine: " + "; ".join(parts) + "."}

@@ -294,10 +294,13 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
                            asym is not None and asym <= th.rounding, CANNOT_TELL,
                            "|L + L^T|/|L| (L must be antisymmetric)"))
     cold = sr["temperature_negative_fraction"]
+    gauge = (sr.get("identified") or {}).get("temperatures") == "ratios"
     reasons.append(_reason(
         "temperatures", cold, th.negative_temperatures,
-        None if cold is None else cold <= th.negative_temperatures, CANNOT_TELL,
+        None if cold is None or gauge else cold <= th.negative_temperatures, CANNOT_TELL,
         why_null.get("temperature_negative_fraction", "") if cold is None else
+        "not applicable: with L = 0 the data fix E only up to a function of itself, so the "
+        "temperatures' sign is not determined (-E gives the same flow)" if gauge else
         f"fraction of the data's states and entropy variables where the learned temperature "
         f"dE/ds_i is negative (least {sr['temperature_min']:.3g})"
         + (": entropy production feeds the motion, which no physical system does"

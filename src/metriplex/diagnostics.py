@@ -15,7 +15,10 @@ One set of functions judges ground-truth systems and learned models alike:
   the model's rollouts;
 - the step sensitivity: how much of the predicted motion changes when the data's time step is
   refined (:func:`step_sensitivity`), which tells a model of the system's vector field from one
-  that is right only with its scheme at the data's step.
+  that is right only with its scheme at the data's step;
+- what the data can determine of the learned E, S and temperatures at all, from which blocks
+  are given and which learned (``identified``, :func:`identified`: e.g. with L = 0 the energy
+  only up to a function of itself).
 
 No quantity that could not be computed is reported as a number: it is ``None`` (``null`` in
 JSON), and ``null_reasons`` says why (for instance "no rollout ran two steps").
@@ -42,7 +45,7 @@ from ._entropy_production import (  # noqa: F401 (re-exported)
 )
 from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
-from ._structure_check import structure_residuals
+from ._structure_check import identified, structure_residuals
 from .data import Trajectories, check_width, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, model_size, solve

@@ -113,7 +113,9 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           :math:`\partial E/\partial s_i` is negative:
                                           entropy production then feeds the motion, which
                                           no physical system does (cannot tell; ``passed``
-                                          is ``None`` for any other entropy)
+                                          is ``None`` for any other entropy, and where
+                                          L = 0: E is then fixed only up to a function
+                                          of itself, and -E gives the same flow)
 ``reversible_share``       0.01 (least)   the share of the standardised motion at the
                                           data's states that :math:`L\nabla E` drives;
                                           below it friction carries the motion, which any
@@ -351,7 +353,9 @@ def verdict(
                      f"its rollouts complete (all {sum(r['passed'] is True for r in reasons)} "
                      "applicable checks pass; see verdict.reasons)." + (
                          "" if converged is not None else " How training ended was not given "
-                         "(history=): a model still improving would be 'cannot tell'."))
+                         "(history=): a model still improving would be 'cannot tell'.") + (
+                         " " + sr["identified"]["statement"][0].upper()
+                         + sr["identified"]["statement"][1:]))
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
@@ -377,6 +381,7 @@ def verdict(
         "observed_energy_rate_relative_median": observed["energy_rate_relative_median"],
         "observed_entropy_decreasing_fraction": observed["entropy_decreasing_fraction"],
         "violations": laws,
+        "identified": sr["identified"],
         "held_out_trajectories": int(len(held)),
         "thresholds": dataclasses.asdict(th),
     }

@@ -39,11 +39,28 @@ def against_constant(metrics: dict) -> tuple[str, bool]:
 NEGATIVE_TEMPERATURES = _LIMITS.negative_temperatures
 
 
+def identified_note(metrics: dict) -> list[str]:
+    """A note of what the data determine of the learned E, S and temperatures (evaluate's
+    ``identified``, :func:`metriplex.diagnostics.identified`) where it is less than E up to a
+    constant and S as given: a physicist reading the learned E or S needs its gauge."""
+    ident = metrics.get("identified") or {}
+    if not (("E" in ident.get("learned", ()) and ident.get("energy") != "constant")
+            or ident.get("entropy") == "function"):
+        return []
+    negative = metrics.get("temperature_negative_fraction")
+    sign = (f" The learned temperatures are negative at {negative:.0%} of the states: with "
+            "L = 0 that is a choice of E's sign, not an error."
+            if ident.get("temperatures") == "ratios" and negative else "")
+    return [f"note: {ident['statement']}{sign} See the README, What the data determine."]
+
+
 def temperature_warnings(metrics: dict) -> list[str]:
     """Warnings on the learned temperatures dE/ds_i (where S is a sum of entropy variables):
     negative ones feed the motion with the entropy production."""
     out = []
     negative = metrics.get("temperature_negative_fraction")
+    if (metrics.get("identified") or {}).get("temperatures") == "ratios":
+        return out  # L = 0: their sign is E's gauge (identified_note says so), not an error
     if negative is not None and negative > NEGATIVE_TEMPERATURES:
         out.append(f"warning: the learned temperatures dE/ds_i are negative at {negative:.0%} "
                    f"of the states (least {metrics['temperature_min']:.3g}): entropy "
@@ -118,7 +135,7 @@ def structure_warnings(metrics: dict) -> list[str]:
     :func:`entropy_rise_warning`, a learned energy that drives almost none of the motion
     (friction carries it), and a learned entropy that the model's own flow decreases (L grad
     S = 0 only as a penalty)."""
-    out = temperature_warnings(metrics) + entropy_rise_warning(metrics)
+    out = temperature_warnings(metrics) + entropy_rise_warning(metrics) + identified_note(metrics)
     negative = metrics.get("entropy_production_negative_fraction")
     if negative is not None and negative > NEGATIVE_PRODUCTION:
         residual = metrics.get("degeneracy_L_gradS_relative")

@@ -1,0 +1,75 @@
+"""What the data can determine of a learned E, S and temperatures (``identified``): the gauges
+that leave the flow unchanged, said wherever the learned E or S is shown (audit: with L = 0 a
+negative energy of the right flow was told its data were not GENERIC)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import jax.random as jr
+import numpy as np
+import pytest
+
+import metriplex as mx
+from metriplex import systems
+from metriplex.app._build import build_model
+from metriplex.app._warnings import structure_warnings
+from metriplex.config import RunConfig
+from metriplex.diagnostics import identified
+from metriplex.verdict import train_reference, verdict
+
+
+@pytest.mark.parametrize("flags,gauges", [
+    (dict(poisson="canonical:1", entropy="sum:2"), ("constant", "given", "determined")),
+    (dict(poisson="zero", entropy="sum:2"), ("function", "given", "ratios")),
+    (dict(poisson="canonical:1"), ("constant", "function", "none")),
+    (dict(), ("factor", "function", "none")),
+    (dict(poisson="lie-poisson", entropy="sum:2"), ("factor", "given", "factor")),
+    (dict(entropy="zero", friction="zero"), ("factor", "zero", None)),
+    (dict(poisson="zero", entropy="sum:2", friction="zero"), ("none", "given", "ratios")),
+])
+def test_what_the_data_determine_follows_which_blocks_are_given(flags, gauges):
+    data = systems.generate("oscillator-bath", trajectories=3, steps=5, seed=0)
+    found = identified(build_model(RunConfig(**flags), data, key=jr.key(0)))
+    assert (found["energy"], found["entropy"], found["temperatures"]) == gauges
+    assert found["statement"].startswith("what the data determine: E ")
+    assert "E" in found["learned"] and ("L" in found["learned"]) == (gauges[0] == "factor")
+
+
+def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
+    system = systems.get_system("heat-exchange")
+    data = systems.generate(system, trajectories=6, steps=30, seed=1)
+    truth = system.model
+    flipped = eqx.tree_at(lambda m: m.energy, truth, mx.Known(lambda x: -truth.energy(x)))
+    x = jnp.asarray(data.x[::7])
+    np.testing.assert_allclose(jax.vmap(flipped.vector_field)(x),
+                               jax.vmap(truth.vector_field)(x), rtol=1e-12)
+    report = mx.evaluate(flipped, data, scheme=mx.RK4())
+    assert report["temperature_negative_fraction"] == 1.0
+    assert report["identified"]["temperatures"] == "ratios"
+    assert not any("feeds the motion" in w for w in structure_warnings(report))
+    # A learned energy in its place is told what the data determine of it.
+    learned = build_model(RunConfig(poisson="zero", entropy="sum:0,1"), data, key=jr.key(0))
+    sr = mx.diagnostics.structure_residuals(learned, data.x)
+    assert sr["identified"]["learned"] == ["E", "M"]
+    (line,) = [w for w in structure_warnings(sr) if w.startswith("note:")]
+    assert line.startswith("note: what the data determine: E only up to a function of itself")
+    assert "only the ratios of the temperatures" in line
+    reference = train_reference(data, steps=1500, width=16)
+    same = [verdict(m, data, report=mx.evaluate(m, data, scheme=mx.RK4()), converged=True,
+                    reference=reference) for m in (truth, flipped)]
+    assert same[0]["outcome"] == same[1]["outcome"], [v["statement"] for v in same]
+    temps = [r for r in same[1]["reasons"] if r["name"] == "temperatures"][0]
+    assert temps["passed"] is None and "not applicable: with L = 0" in temps["note"]
+    assert same[1]["outcome"] == "consistent", same[1]["statement"]
+    assert same[1]["statement"].endswith("What the data determine: E is given; S is given.")
+
+
+def test_a_learned_entropy_says_its_temperatures_are_not_determined():
+    data = systems.generate("oscillator-bath", trajectories=3, steps=5, seed=0)
+    model = build_model(RunConfig(poisson="canonical:1"), data, key=jr.key(0))
+    report = mx.diagnostics.structure_residuals(model, data.x)
+    assert report["temperature_min"] is None
+    assert "S is learned, so the temperatures are not determined" in \
+        report["null_reasons"]["temperature_min"]
