@@ -13,8 +13,7 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ._layout import SAVE_DPI as SAVE_DPI  # noqa: E402
-from ._layout import save_figure as save_figure  # noqa: E402
+from ._layout import SAVE_DPI as SAVE_DPI, save_figure as save_figure  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -226,8 +225,8 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
     if S_true is not None:
         a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
     suffix = "" if failed_at is None else f"\n(the rollout failed at t = {failed_at:.4g})"
-    for ax, what, spread in ((a1, "energy E", None if spreads is None else spreads[0]),
-                             (a2, "entropy S", None if spreads is None else spreads[1])):
+    for ax, what, spread, v in ((a1, "energy E", (spreads or (None, None))[0], E),
+                                (a2, "entropy S", (spreads or (None, None))[1], S)):
         if failed_at is not None:
             ax.axvline(failed_at, color="0.4", lw=0.8, ls=":", label="rollout failed")
         _time_limits(ax, ts)
@@ -235,20 +234,21 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
         ax.ticklabel_format(axis="y", useOffset=False)  # an offset label overlapped the title
         ax.set_xlabel("t")
         ax.set_ylabel(f"learned {what}")
-        ax.set_title(f"{what.split()[0]} along the learned rollout and the data{suffix}")
+        moved = "" if not spread or not np.isfinite(v).any() else (  # the axis can magnify it
+            f"\n(moves by {np.nanmax(v) - np.nanmin(v):.3g} on the rollout: "
+            f"{(np.nanmax(v) - np.nanmin(v)) / spread:.2%} of its spread over the data)")
+        ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
+                     fontsize=10)
         ax.legend(fontsize=8)
     return fig
 
 
 def _least_span(ax: Axes, spread: float | None) -> None:
     """Widen the y-axis about its middle to :data:`LEAST_SPAN` of ``spread``, if narrower."""
-    if spread is None or not np.isfinite(spread) or spread <= 0:
-        return
     lo, hi = ax.get_ylim()
-    least = LEAST_SPAN * spread
-    if hi - lo < least:
-        mid = 0.5 * (lo + hi)
-        ax.set_ylim(mid - 0.5 * least, mid + 0.5 * least)
+    if spread is not None and np.isfinite(spread) and 0 < spread and hi - lo < LEAST_SPAN * spread:
+        mid, half = 0.5 * (lo + hi), 0.5 * LEAST_SPAN * spread
+        ax.set_ylim(mid - half, mid + half)
 
 
 def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | None = None,
