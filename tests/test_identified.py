@@ -56,9 +56,9 @@ def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
     (line,) = [w for w in structure_warnings(sr) if w.startswith("note:")]
     assert line.startswith("note: what the data determine: E only up to a function of itself")
     assert "only the ratios of the temperatures" in line
-    reference = train_reference(data, steps=1500, width=16)
-    same = [verdict(m, data, report=mx.evaluate(m, data, scheme=mx.RK4()), converged=True,
-                    reference=reference) for m in (truth, flipped)]
+    reference = train_reference(data, steps=300, width=8)  # the truth fits alone (< 3 %)
+    same = [verdict(m, data, report=r, converged=True, reference=reference)
+            for m, r in ((truth, mx.evaluate(truth, data, scheme=mx.RK4())), (flipped, report))]
     assert same[0]["outcome"] == same[1]["outcome"], [v["statement"] for v in same]
     temps = [r for r in same[1]["reasons"] if r["name"] == "temperatures"][0]
     assert temps["passed"] is None and "not applicable: with L = 0" in temps["note"]
