@@ -239,3 +239,29 @@ def test_the_worst_trajectory_is_the_first_to_fail_whatever_the_integer_width():
                       np.zeros(4, np.int32))
         assert worst_trajectory(out, np.zeros((4, 3, 1)), [3] * 4) == int(np.argmin(
             [f if f >= 0 else 99 for f in failed]))
+
+
+def test_the_report_draws_the_learned_temperatures_with_what_the_data_determine(tmp_path):
+    # Where S is a sum of entropy variables the report adds dE/ds_i at the data's states (a
+    # physicist asking "what are its temperatures?" had only their least value: audit 8).
+    import jax
+    import jax.numpy as jnp
+
+    from metriplex.app._temperature_plot import temperatures
+    from metriplex.systems import generate, get_system
+
+    truth = get_system("heat-exchange").model
+    data = generate("heat-exchange", trajectories=2, steps=10, seed=0)
+    report_figures(truth, data, tmp_path / "sum", scheme="rk4")
+    with np.load(tmp_path / "sum" / "temperatures.npz") as saved:
+        s, T, names = saved["entropy_variables"], saved["temperature"], saved["names"]
+    assert list(names) == list(data.names) and len(s) == len(data.x)
+    true = jax.vmap(jax.grad(truth.energy))(jnp.asarray(s))
+    np.testing.assert_allclose(T, true, rtol=1e-12)
+    fig = temperatures(s, T, list(names), gauge="ratios")
+    assert "only their ratios are determined" in fig.get_suptitle()
+    plt.close(fig)
+    learned = mx.GenericModel(mx.Known(lambda x: x @ x), mx.Known(lambda x: x[0]),
+                              mx.ZeroPoisson(2), mx.ZeroFriction(2))
+    report_figures(learned, data, tmp_path / "other", scheme="rk4")
+    assert not list((tmp_path / "other").glob("temperatures.*"))

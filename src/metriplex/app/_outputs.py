@@ -13,9 +13,10 @@ from .._errors import MetriplexError
 def check_figures(folder: str | Path, overwrite: bool) -> None:
     """Refuse, before any work, report figures that would replace files in ``folder``
     without ``--overwrite``."""
-    from ._report import FIGURE_SUFFIXES, REPORT_FIGURES
+    from ._report import FIGURE_SUFFIXES, REPORT_FIGURES, TEMPERATURE_FIGURE
 
-    there = [f"{name}{suffix}" for name in REPORT_FIGURES for suffix in FIGURE_SUFFIXES
+    there = [f"{name}{suffix}" for name in (*REPORT_FIGURES, TEMPERATURE_FIGURE)
+             for suffix in FIGURE_SUFFIXES
              if (Path(folder) / f"{name}{suffix}").exists()]
     if there and not overwrite:
         raise MetriplexError(

@@ -21,6 +21,10 @@ from .config import scheme_from_name
 from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import _relative_error, energy_entropy_along, error_over_time, rollout_data
 from .._progress import progress_bar
+from .._model import float_dtype
+from .._structure_check import _terms_at, identified
+from ..structure import SumOf
+from ._temperature_plot import temperatures
 
 if TYPE_CHECKING:
     from .._model import GenericModel
@@ -43,8 +47,10 @@ class Truth:
     data_label: str = "true"
 
 
-#: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ.
+#: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ; and the one it
+#: adds where S is a sum of entropy variables (the learned temperatures).
 REPORT_FIGURES = ("trajectories", "error", "residual", "energy_entropy")
+TEMPERATURE_FIGURE = "temperatures"
 FIGURE_SUFFIXES = (".png", ".pdf", ".npz")
 
 
@@ -64,7 +70,9 @@ def report_figures(model: GenericModel, data: Trajectories, folder: str | Path, 
     ``scheme``: a scheme, or its command-line name (with ``solver``). ``rollout``: what
     :func:`~metriplex.diagnostics.rollout_data` returned for this model, data and scheme, to
     reuse. ``truth``: the known model's curves, drawn beside the learned ones (:class:`Truth`).
-    ``progress``: a bar over the four figures (large data take a while to draw)."""
+    ``progress``: a bar over the figures (large data take a while to draw). Where S is a sum
+    of entropy variables, a fifth: the learned temperatures at the data's states, with what
+    the data determine of them (:data:`TEMPERATURE_FIGURE`)."""
     K, worst, folder = len(data.ids), k is None, Path(folder)
     if not worst and not (isinstance(k, (int, np.integer)) and 0 <= k < K):
         raise MetriplexError(f"report_figures' k is the position of a trajectory in the data, "
@@ -74,7 +82,8 @@ def report_figures(model: GenericModel, data: Trajectories, folder: str | Path, 
     k = worst_trajectory(out, xs, lengths) if worst else k
     which = f"trajectory {data.ids[k]}" + (
         "" if K == 1 else f", the worst of {K} rollouts" if worst else f" of {K}")
-    with progress_bar(total=4, disable=not progress, desc="figures", unit="figure",
+    with progress_bar(total=4 + isinstance(model.entropy, SumOf), disable=not progress,
+                      desc="figures", unit="figure",
                       leave=False) as bar:
         _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth or Truth(
             data_label="observed"), bar)
@@ -158,6 +167,19 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
                       folder / "energy_entropy", t=ts, energy=E, entropy=S,
                       energy_along_data=E_data, entropy_along_data=S_data, **fitted)
     bar.update()
+    if isinstance(model.entropy, SumOf):
+        # At the states structure_residuals reads (its subsample, so its compiled program).
+        x = data.x if len(data.x) <= 256 else data.x[np.linspace(0, len(data.x) - 1,
+                                                                256).astype(int)]
+        gE = np.asarray(_terms_at(model, jnp.asarray(x, float_dtype(model))).grad_energy,
+                        dtype=np.float64)
+        idx = list(model.entropy.indices)
+        entropies = [names[i] for i in idx]
+        plots.save_figure(temperatures(x[:, idx], gE[:, idx], entropies,
+                                       gauge=identified(model)["temperatures"]),
+                          folder / TEMPERATURE_FIGURE, entropy_variables=x[:, idx],
+                          temperature=gE[:, idx], names=np.array(entropies))
+        bar.update()
 
 
 @eqx.filter_jit

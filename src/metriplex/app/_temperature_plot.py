@@ -1,0 +1,47 @@
+r"""The learned temperatures figure of the report: :math:`T_i = \partial E/\partial s_i` against
+:math:`s_i` at the data's states, where S is a sum of entropy variables, with what the data
+determine of them in its title (:func:`metriplex.diagnostics.identified`)."""
+
+from __future__ import annotations
+
+import textwrap
+from typing import TYPE_CHECKING, Sequence
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+#: The title's line for each gauge of the temperatures (``identified``'s ``temperatures``).
+GAUGE = {
+    "determined": "determined by the data where heat flows (L and S given)",
+    "factor": "up to one common factor: L is learned, and (L/a, aE) give the same flow",
+    "ratios": "only their ratios are determined: with L = 0 their common scale and sign are "
+              "not (-E gives the same flow)",
+}
+
+
+def temperatures(s: np.ndarray, T: np.ndarray, names: Sequence[str], *,
+                 gauge: str | None = None) -> Figure:
+    """One panel per entropy variable: the learned temperature ``T[:, i]`` against ``s[:, i]``
+    at the same states (shape ``(states, k)`` both), a dotted line at zero; ``gauge``: a key of
+    :data:`GAUGE`, said in the title."""
+    k = T.shape[1]
+    cols = min(k, 4)
+    rows = -(-k // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.0 * rows + 0.6),
+                             constrained_layout=True, squeeze=False)
+    for i, ax in enumerate(axes.flat):
+        if i >= k:
+            ax.set_visible(False)
+            continue
+        finite = np.isfinite(s[:, i]) & np.isfinite(T[:, i])
+        ax.scatter(s[finite, i], T[finite, i], s=5, color="C3", alpha=0.6)
+        ax.axhline(0.0, color="0.5", lw=0.8, ls=":")
+        ax.set_xlabel(names[i])
+        ax.set_ylabel(f"learned dE/d{names[i]}")
+    fig.suptitle("learned temperatures dE/ds_i at the data's states"
+                 + ("\n" + textwrap.fill(GAUGE[gauge], 30 + 30 * cols) if gauge in GAUGE else ""),
+                 fontsize=10)
+    return fig
