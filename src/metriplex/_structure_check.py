@@ -191,7 +191,8 @@ def _jacobi_parts(model: GenericModel, xs):
 IDENTIFIED = {
     "energy": {
         "constant": "E up to an added constant",
-        "factor": "E up to a factor and an added constant (L/a with a*E gives the same flow)",
+        "factor": "E up to a factor and an added constant at least (L/a with a*E gives the "
+                  "same flow; in two or three variables, L/F'(E) with F(E) too)",
         "function": "E only up to a function of itself, F(E): with L = 0 it enters the flow "
                     "only through M grad E = 0, so its scale, shape and sign are not determined",
         "none": "E not at all: L = 0 and M = 0, so the flow does not use it",
