@@ -494,6 +494,13 @@ def test_a_residual_far_beyond_the_reference_is_not_hidden_by_the_tolerance():
     # Both under 1 %: what training budgets decide.
     (_, _, small), _ = _residual_checks(0.009, 0.0005, "", th)
     assert small["passed"] is True
+    # The zoo's heat exchange, fitted to a rollout error of 9e-4: 1.76 % against 0.31 % (5.6x)
+    # was "not consistent" with the limit at 1 % (benchmarks/zoo.py --verdict); a weakly
+    # driven Van der Pol fitted as conservative, 4.1 % against 0.46 %, still is.
+    (_, _, exchange), _ = _residual_checks(0.0176, 0.0031, "", th)
+    assert exchange["passed"] is True
+    (_, _, driven), _ = _residual_checks(0.041, 0.0046, "", th)
+    assert driven["passed"] is False
 
 
 def test_failed_rollouts_excuse_a_misfit_only_where_it_is_not_decisive():

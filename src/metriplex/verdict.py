@@ -81,7 +81,7 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           where residuals under the tolerance (3% of the
                                           rates) count as the tolerance: below it,
                                           differences are what training budgets decide;
-                                          or more than 1% and 5x the reference's own
+                                          or more than 3% and 5x the reference's own
                                           (``far_residual``, ``far_ratio``) (not consistent)
 ``degeneracy_L_gradS``     0.1            :math:`|L\nabla S|/(|L|_F|\nabla S|)` in
                                           standardised coordinates, 0 when exact; an
@@ -202,7 +202,7 @@ class Thresholds:
     negative_temperatures: float = 0.01
     reversible_share: float = 0.01
     far_ratio: float = 5.0
-    far_residual: float = 0.01
+    far_residual: float = 0.03
     step_sensitivity: float = 0.1
     training_range: float = 6.0
 
