@@ -22,6 +22,14 @@ from .structure import SumOf, ZeroFriction, ZeroPoisson, ZeroPotential
 _TINY = 1e-300
 
 
+def states_read(x: np.ndarray, max_states: int = 256) -> np.ndarray:
+    """The states of ``x`` that :func:`structure_residuals` reads: all of them, or
+    ``max_states`` evenly spaced rows (the same rows, so the same compiled program, for the
+    report's temperatures)."""
+    x = np.asarray(x)
+    return x if len(x) <= max_states else x[np.linspace(0, len(x) - 1, max_states).astype(int)]
+
+
 @in_full_precision
 def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int = 256,
                         scale: np.ndarray | None = None) -> dict:
@@ -57,9 +65,7 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     :math:`E` does not drive it (any flow whose entropy grows admits such a model, so the fit
     does not identify :math:`E`).
     """
-    x = np.asarray(x)
-    if len(x) > max_states:
-        x = x[np.linspace(0, len(x) - 1, max_states).astype(int)]
+    x = states_read(x, max_states)
     n = x.shape[1]
     d = np.ones(n) if scale is None else np.asarray(scale, dtype=np.float64)
     xj = jnp.asarray(x, float_dtype(model))

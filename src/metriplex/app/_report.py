@@ -22,7 +22,7 @@ from ..data import Trajectories, state_scale, time_scale
 from ..diagnostics import _relative_error, energy_entropy_along, error_over_time, rollout_data
 from .._progress import progress_bar
 from .._model import float_dtype
-from .._structure_check import _terms_at, identified
+from .._structure_check import _terms_at, identified, states_read
 from ..structure import SumOf
 from ._temperature_plot import temperatures
 
@@ -168,9 +168,7 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
                       energy_along_data=E_data, entropy_along_data=S_data, **fitted)
     bar.update()
     if isinstance(model.entropy, SumOf):
-        # At the states structure_residuals reads (its subsample, so its compiled program).
-        x = data.x if len(data.x) <= 256 else data.x[np.linspace(0, len(data.x) - 1,
-                                                                256).astype(int)]
+        x = states_read(data.x)  # structure_residuals' states: its compiled program serves
         gE = np.asarray(_terms_at(model, jnp.asarray(x, float_dtype(model))).grad_energy,
                         dtype=np.float64)
         idx = list(model.entropy.indices)

@@ -169,8 +169,8 @@ def file_step(arrays: dict, where: str) -> tuple[str | None, float | None]:
             or float(raw.reshape(-1)[0]) <= 0:
         raise MetriplexError(
             f"time step `{keys[0]}` of {where} must be one positive finite number; got "
-            f"{_describe(raw)} {raw.reshape(-1)[:5].tolist()}. Save the step as a number (np.savez(..., dt=0.1)), or remove it "
-            "and pass --dt STEP.")
+            f"{_describe(raw)} {raw.reshape(-1)[:5].tolist()}. Save the step as a number "
+            "(np.savez(..., dt=0.1)), or remove it and pass --dt STEP.")
     return keys[0], float(raw.reshape(-1)[0])
 
 
