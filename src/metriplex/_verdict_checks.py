@@ -39,6 +39,17 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
                       "what is known, such as the entropy variables (--entropy sum:I,J).")
 
 
+#: What a "cannot tell" adds where the learned L failed the Jacobi check: a user asking "is it
+#: GENERIC?" of such a fit needs the means to ask it (found by running the verdict across the
+#: zoo: three of seven learned L were not Poisson). Only means that were measured to work are
+#: named: on oscillator-family the Jacobi penalty (--jacobi exact, weight 1 and 100) left the
+#: residual at 0.52 and 0.45 (docs/zoo.md, *The verdict across systems*).
+NOT_POISSON = ("The learned L is not a Poisson bivector there; training has no Jacobi penalty "
+               "by default, and the penalty (--jacobi exact) need not bring it under the "
+               "limit. Give L where it is known (--poisson canonical:K or file:L.npy); with "
+               "three variables, --poisson casimir3 builds it Poisson by construction.")
+
+
 #: What a NOT-consistent statement adds first where S is given and the observed data decrease
 #: it: the flaw is in the entropy given, not a variable missing (found by a check of the verdict
 #: on data whose entropy's sign was flipped).

@@ -164,9 +164,9 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
-                              NOT_CONSISTENT, UNIDENTIFIED_SPLIT, _SPLIT_CHECKS, _fmt, _range_check,
-                              _residual_checks, _soundness_checks, _structure_checks,
-                              _violations, _far_beyond)
+                              NOT_CONSISTENT, NOT_POISSON, UNIDENTIFIED_SPLIT, _SPLIT_CHECKS,
+                              _fmt, _range_check, _residual_checks, _soundness_checks,
+                              _structure_checks, _violations, _far_beyond)
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroPotential
 
@@ -365,7 +365,10 @@ def verdict(
     else:
         statement = ("cannot tell whether the data are consistent with GENERIC: "
                      + "; ".join(_said(r) for r in failed) + ".")
-        if _learned(model.entropy) and {r["name"] for r in failed} & _SPLIT_CHECKS:
+        names = {r["name"] for r in failed}
+        if "jacobi" in names and _learned(model.poisson):
+            statement += " " + NOT_POISSON
+        if _learned(model.entropy) and names & _SPLIT_CHECKS:
             statement += " " + UNIDENTIFIED_SPLIT
     return {
         "outcome": outcome,
