@@ -105,3 +105,17 @@ def test_every_matrix_block_states_its_size_and_the_model_reads_it():
     with pytest.raises(mx.MetriplexError, match=r"MaskedPoisson's base must be a Poisson or "
                                                 r"friction block .*; got 'canonical'"):
         mx.MaskedPoisson("canonical", (1,))
+
+
+def test_a_model_of_the_flow_alone_is_evaluated_without_what_it_has_not():
+    # `identified` (what the data determine of E and S) read model.poisson of every model, so
+    # evaluating the verdict's reference, a bare vector field, raised AttributeError (found by
+    # benchmarks/outside_zoo.py, which evaluates one beside each case).
+    import metriplex as mx
+    from metriplex._reference import BlackBoxModel
+    from metriplex.systems import generate
+
+    data = generate("oscillator-bath", trajectories=2, steps=5, seed=0)
+    box = BlackBoxModel(3, width=4, data=jnp.asarray(data.x), key=jax.random.key(0))
+    report = mx.evaluate(box, data, scheme=mx.RK4())
+    assert report["trajectories"] == 2 and report["identified"] is None

@@ -127,7 +127,8 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     spread = np.std(x, axis=0)
     d_share = d if scale is not None else np.where(spread > 0, spread, 1.0)
     out.update(_temperatures(model, gE, d_share, null_reasons))
-    out["identified"] = identified(model)
+    # (a model of the flow alone, such as the verdict's reference, has no E, S, L or M)
+    out["identified"] = identified(model) if isinstance(model, GenericModel) else None
     out["reversible_share"] = _reversible_share(L, M, gE, gS, d_share, nL, null_reasons)
     out["null_reasons"] = null_reasons
     return out
