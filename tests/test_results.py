@@ -232,11 +232,12 @@ def test_the_verdict_cannot_tell_where_friction_carries_the_motion():
     from metriplex.verdict import Thresholds
 
     sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.0,
-          "jacobi_residual_relative": None, "friction_min_eigenvalue": 0.0,
+          "jacobi_residual_relative": None, "jacobi_residual_to_L": None,
+          "friction_min_eigenvalue": 0.0,
           "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
           "temperature_negative_fraction": 0.0, "temperature_min": 0.5,
           "reversible_share": 2e-9,
-          "null_reasons": {"jacobi_residual_relative": "L is constant"}}
+          "null_reasons": {"jacobi_residual_to_L": "L is zero"}}
     report = {"entropy_production_negative_fraction": 0.0}
 
     def check():
@@ -260,10 +261,11 @@ def test_the_verdict_cannot_tell_where_learned_temperatures_are_negative():
     from metriplex.verdict import Thresholds
 
     sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.01,
-          "jacobi_residual_relative": None, "friction_min_eigenvalue": 0.0,
+          "jacobi_residual_relative": None, "jacobi_residual_to_L": None,
+          "friction_min_eigenvalue": 0.0,
           "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
           "temperature_negative_fraction": 0.3, "temperature_min": -2.5e-5,
-          "null_reasons": {"jacobi_residual_relative": "L is constant"}}
+          "null_reasons": {"jacobi_residual_to_L": "L is zero"}}
     report = {"entropy_production_negative_fraction": 0.0}
     def check():
         return [r for r in _structure_checks(sr, report, Thresholds())

@@ -39,7 +39,11 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     :math:`|M\nabla E|/(|M|_F|\nabla E|)` (0 exact, about 0.7 and 1 at most: no degeneracy at
     all), averaged over the states where their factors are not zero, and the Jacobi residual
     :math:`|J|/(3|T|)` (0 for a Poisson bivector, 1 when its three cyclic terms do not cancel
-    at all). They do not depend on the units of time, of :math:`E` or of :math:`S`. With
+    at all), and ``jacobi_residual_to_L``, :math:`|J|/(3\max(|T|, |L|^2))`: the same where
+    :math:`L` varies at least by its own size over a unit of the state, and :math:`J`
+    against :math:`|L|^2` where it varies less (close to a constant :math:`L`, whose few
+    cancellations in a small :math:`T` say nothing; the verdict reads this one). They do not
+    depend on the units of time, of :math:`E` or of :math:`S`. With
     ``scale`` (the per-variable data scale :math:`d`) they are measured in standardised
     coordinates :math:`\tilde x = x/d` (:math:`\tilde L = D^{-1}LD^{-1}`,
     :math:`\widetilde{\nabla S} = D\nabla S`), so they do not depend on the units of the state
@@ -108,6 +112,14 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
                        "jacobi_residual_relative",
                        "the product (dL) L of L's derivative and L is zero at every state (L "
                        "is constant, or zero): the Jacobi identity holds exactly")
+    # Against |L|^2 where L varies less than its own size over a standard deviation: a learned
+    # L close to a constant one (the canonical L of most systems) has a small (dL) L whose few
+    # cancellations say nothing, while it is as close to a Poisson bivector as |J| is to |L|^2.
+    Ls2 = np.sum(Ls[: len(J)] ** 2, axis=(1, 2))
+    jac_to_L = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
+                        3.0 * np.maximum(np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
+                                         Ls2),
+                        "jacobi_residual_to_L", "L is zero at every state: it is Poisson")
     eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
     nL_raw = np.linalg.norm(L, axis=(1, 2))
     asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL_raw, _TINY)
@@ -118,6 +130,7 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
         "degeneracy_M_gradE_relative": rel_MS,
         "jacobi_residual": float(np.mean(jac_abs)),
         "jacobi_residual_relative": jac_rel,
+        "jacobi_residual_to_L": jac_to_L,
         "poisson_antisymmetry_relative": float(np.max(asym)),
         "friction_min_eigenvalue": float(np.min(eig)),
         "friction_max_eigenvalue": float(np.max(eig)),

@@ -266,7 +266,8 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
     for name, key, what in (
             ("degeneracy_L_gradS", "degeneracy_L_gradS_relative", "|L grad S|/(|L||grad S|)"),
             ("degeneracy_M_gradE", "degeneracy_M_gradE_relative", "|M grad E|/(|M||grad E|)"),
-            ("jacobi", "jacobi_residual_relative", "relative Jacobi residual |J|/(3|T|)")):
+            ("jacobi", "jacobi_residual_to_L",
+             "Jacobi residual |J|/(3 max(|T|, |L|^2)), T = (dL) L")):
         v = sr[key]
         if v is None:
             reasons.append(_reason(name, None, th.jacobi if name == "jacobi" else th.degeneracy,

@@ -90,10 +90,13 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           (cannot tell)
 ``degeneracy_M_gradE``     0.1            :math:`|M\nabla E|/(|M|_F|\nabla E|)`, 0 exact, at
                                           most 1 (cannot tell)
-``jacobi``                 0.1            :math:`|J|/(3|T|)`: 0 for a Poisson bivector, 1 when
-                                          the three cyclic terms do not cancel at all; an
-                                          untrained ``SkewMLPPoisson`` gives 0.2–0.3 for
-                                          n = 3 and about 0.5 for n = 5–8 (cannot tell)
+``jacobi``                 0.1            :math:`|J|/(3\max(|T|,|L|^2))`, :math:`T = (\partial
+                                          L)L`: 0 for a Poisson bivector, 1 when the three
+                                          cyclic terms do not cancel at all; against
+                                          :math:`|L|^2` where L varies less than its size
+                                          (close to a constant L); an untrained
+                                          ``SkewMLPPoisson`` gives 0.2–0.3 for n = 3 and
+                                          about 0.5 for n = 5–8 (cannot tell)
 ``entropy_production``     0.01           the fraction of the states along the structured
                                           model's rollouts where its own flow decreases its
                                           entropy by more than 1% of the fastest rate the
