@@ -140,9 +140,13 @@ def test_a_tiny_change_of_the_energy_is_drawn_flat_and_the_data_beside_the_rollo
     assert "learned E along the data" in labels and "learned E along the learned rollout" in labels
     assert entropy.get_ylim()[1] - entropy.get_ylim()[0] < 1.0  # wider data: autoscaled as before
     # The title says how much the rollout moves, against the spread over the data (an axis
-    # 1 % of it still made a 0.26 % drift look like a first-law violation: audit 8).
-    assert "moves by 0.004 on the rollout: 0.02% of its spread over the data" in energy.get_title()
-    assert "25.00% of its spread over the data" in entropy.get_title()
+    # 1 % of it still made a 0.26 % drift look like a first-law violation: audit 8), and how
+    # much the learned E moves along the data (29 % of its spread where the data were noisy,
+    # under a title that spoke of the rollout alone: audit 9).
+    title = energy.get_title()
+    assert "on the rollout: moves by 0.004, 0.02% of its spread over the data" in title
+    assert "on the data: moves by 0.004, 0.02% of its spread over the data" in title
+    assert "on the rollout: moves by 0.5, 25.00% of its spread" in entropy.get_title()
     plt.close(fig)
 
 

@@ -30,7 +30,8 @@ def temperatures(s: np.ndarray, T: np.ndarray, names: Sequence[str], *,
     k = T.shape[1]
     cols = min(k, 4)
     rows = -(-k // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.0 * rows + 0.6),
+    width = max(3.6 * cols, 5.0)  # wide enough for the title's first line
+    fig, axes = plt.subplots(rows, cols, figsize=(width, 3.0 * rows + 0.6),
                              constrained_layout=True, squeeze=False)
     for i, ax in enumerate(axes.flat):
         if i >= k:
@@ -42,6 +43,8 @@ def temperatures(s: np.ndarray, T: np.ndarray, names: Sequence[str], *,
         ax.set_xlabel(names[i])
         ax.set_ylabel(f"learned dE/d{names[i]}")
     fig.suptitle("learned temperatures dE/ds_i at the data's states"
-                 + ("\n" + textwrap.fill(GAUGE[gauge], 30 + 30 * cols) if gauge in GAUGE else ""),
+                 # about 12 characters of 10-point text per inch
+                 + ("\n" + textwrap.fill(GAUGE[gauge], int(12 * width)) if gauge in GAUGE
+                    else ""),
                  fontsize=10)
     return fig

@@ -208,12 +208,11 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
                    failed_at: float | None = None) -> Figure:
     """Energy and entropy along a rollout (learned potentials; true ones if known) and the
     learned ones along the observed trajectory (``E_data``, ``S_data``: for GENERIC data E
-    stays constant there and S does not decrease). ``spreads``: each potential's spread over
-    the data, of which an axis spans at least :data:`LEAST_SPAN`. ``failed_at``: the time at
-    which the rollout failed; the potentials stop there."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.5), constrained_layout=True)
-    E = np.where(np.isfinite(E), E, np.nan)
-    S = np.where(np.isfinite(S), S, np.nan)
+    stays constant there and S does not decrease); the titles say how far each moves against
+    ``spreads``, each potential's spread over the data (of which an axis spans at least
+    :data:`LEAST_SPAN`). ``failed_at``: where the rollout failed; the potentials stop there."""
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.9), constrained_layout=True)
+    E, S = (np.where(np.isfinite(a), a, np.nan) for a in (E, S))
     _line(a1, ts, E, color="C3", label="learned E along the learned rollout")
     _line(a2, ts, S, color="C0", label="learned S along the learned rollout")
     if E_data is not None:
@@ -225,8 +224,8 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
     if S_true is not None:
         a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
     suffix = "" if failed_at is None else f"\n(the rollout failed at t = {failed_at:.4g})"
-    for ax, what, spread, v in ((a1, "energy E", (spreads or (None, None))[0], E),
-                                (a2, "entropy S", (spreads or (None, None))[1], S)):
+    panels = ((a1, "energy E", E, E_data), (a2, "entropy S", S, S_data))
+    for (ax, what, v, on_data), spread in zip(panels, spreads or (None, None)):
         if failed_at is not None:
             ax.axvline(failed_at, color="0.4", lw=0.8, ls=":", label="rollout failed")
         _time_limits(ax, ts)
@@ -234,9 +233,10 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
         ax.ticklabel_format(axis="y", useOffset=False)  # an offset label overlapped the title
         ax.set_xlabel("t")
         ax.set_ylabel(f"learned {what}")
-        moved = "" if not spread or not np.isfinite(v).any() else (  # the axis can magnify it
-            f"\n(moves by {np.nanmax(v) - np.nanmin(v):.3g} on the rollout: "
-            f"{(np.nanmax(v) - np.nanmin(v)) / spread:.2%} of its spread over the data)")
+        moved = "".join(f"\non the {w}: moves by {np.nanmax(c) - np.nanmin(c):.3g}, "
+                        f"{(np.nanmax(c) - np.nanmin(c)) / spread:.2%} of its spread over the data"
+                        for w, c in (("rollout", v), ("data", on_data))
+                        if spread and c is not None and np.isfinite(c).any())
         ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
                      fontsize=10)
         ax.legend(fontsize=8)
