@@ -6,9 +6,9 @@ One set of functions judges ground-truth systems and learned models alike:
   rolled out from each trajectory's first state on its own time grid, beside the error of
   predicting no motion at all, :math:`x(t) = x(0)`, which a model must beat to predict anything
   (``constant_prediction_error_mean``);
-- the energy's relative drift along the model's own rollout (relative to the larger of
-  :math:`|E(x_0)|` and the energy's spread over the data's states, since a learned energy's
-  offset is arbitrary) and the entropy change per step;
+- the energy's relative drift along the model's own rollout (to the larger of :math:`|E(x_0)|`
+  and E's spread over the data, as its offset is arbitrary), and along the observed data, which
+  GENERIC data keep constant (``energy_change_along_data_over_spread``); the entropy's steps;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
   factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
 - the sign of the entropy production :math:`\dot S = \nabla S\cdot\dot x` at the states along
@@ -276,6 +276,10 @@ def evaluate(
         "energy_drift_over_data_spread": known(
             float(np.max(drifts_gauge)) if drifts_gauge else None,
             "energy_drift_over_data_spread", no_steps),
+        # The most the learned E moves along an observed trajectory, in units of its spread.
+        "energy_change_along_data_over_spread": known(float(max(
+            np.ptp(E_data[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
+            "energy_change_along_data_over_spread", "the learned E is not finite at the data"),
         "entropy_min_step": known(float(np.min(dS_min)) if dS_min else None,
                                   "entropy_min_step", no_steps),
         "entropy_negative_step_fraction": known(float(np.mean(neg_frac)) if neg_frac else None,
