@@ -269,3 +269,16 @@ def test_the_report_draws_the_learned_temperatures_with_what_the_data_determine(
                               mx.ZeroPoisson(2), mx.ZeroFriction(2))
     report_figures(learned, data, tmp_path / "other", scheme="rk4")
     assert not list((tmp_path / "other").glob("temperatures.*"))
+
+
+def test_the_error_axis_is_not_stretched_by_the_rounding_of_the_first_state():
+    # A float32 rollout starts at the data's state up to rounding (1e-8); that point set the
+    # axis's floor, squeezing the errors of 1e-2 into its top sixth (audit 9).
+    ts = np.linspace(0.0, 5.0, 51)
+    err = np.full(51, 2e-2)
+    err[0] = 1e-8
+    for fig in (plots.error_over_time(ts, err, per_variable={"q": err, "p": 0.5 * err}),
+                plots.rollout_errors(ts[None], err[None], per_variable={"q": err})):
+        for ax in fig.axes:
+            assert ax.get_ylim()[0] > 1e-4, ax.get_title()
+        plt.close(fig)

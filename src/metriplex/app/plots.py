@@ -50,8 +50,8 @@ def _positive(a, ceiling=None):
 
 
 def _log_limits(ax, *arrays, empty: str = "") -> None:
-    """Fit a log axis to the finite positive values of ``arrays``, at most ``LOG_SPAN`` below
-    the largest; when there are none, say ``empty`` in the middle of the axes."""
+    """Fit a log axis to the finite positive values of ``arrays`` (errors from the second state:
+    the first is rounding), at most ``LOG_SPAN`` below the largest; if none, say ``empty``."""
     vals = [np.ravel(a)[np.isfinite(np.ravel(a))] for a in arrays if np.size(a)]
     vals = np.concatenate(vals) if vals else np.zeros(0)
     if len(vals) == 0:
@@ -275,7 +275,7 @@ def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | 
         ax.semilogy(ts, r, color="0.4", ls="--", label="ground truth, same scheme and dt")
         drawn.append(r)
         entries += 1
-    _log_limits(ax, *drawn, empty="no finite positive error to draw")
+    _log_limits(ax, *(d[1:] for d in drawn), empty="no finite positive error to draw")
     _time_limits(ax, ts)
     title = "rollout error over time"
     if failed_at is not None:
@@ -340,7 +340,7 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
         ax.plot([], [], color="C0", lw=0.7, label="completed rollouts")
     if n_failed:
         ax.plot([], [], color="C3", lw=0.7, label="failed rollouts (up to the failure)")
-    _log_limits(ax, *drawn, empty="no rollout got past its first state")
+    _log_limits(ax, *(d[1:] for d in drawn), empty="no rollout got past its first state")
     _time_limits(ax, ts)
     ax.set_xlabel("t")
     ax.set_ylabel("relative error |x - x_data| / rms |x_data|")
@@ -354,7 +354,7 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
         length = len(next(iter(per_variable.values()))) if per_variable else ts.shape[1]
         tk = ts[trajectory if trajectory is not None else 0, :length]
         entries = _per_variable_lines(ax2, tk, per_variable, max_labels, ERROR_CEILING)
-        _log_limits(ax2, *[_positive(v, ERROR_CEILING) for v in per_variable.values()],
+        _log_limits(ax2, *[_positive(v, ERROR_CEILING)[1:] for v in per_variable.values()],
                     empty="this rollout failed before its second state")
         _time_limits(ax2, tk)
         ax2.set_xlabel("t")
