@@ -107,19 +107,16 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     ddd = d[:, None, None] * d[None, :, None] * d[None, None, :]
     # Each of the three cyclic terms of J has the Frobenius norm of T = (dL) L; measure J
     # against their sum, so 1 means "no cancellation at all" and 0 an exact Poisson bracket.
-    jac_rel = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
-                       3.0 * np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
-                       "jacobi_residual_relative",
+    nJ = np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3)))
+    nT = np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3)))
+    jac_rel = relative(nJ, 3.0 * nT, "jacobi_residual_relative",
                        "the product (dL) L of L's derivative and L is zero at every state (L "
                        "is constant, or zero): the Jacobi identity holds exactly")
     # Against |L|^2 where L varies less than its own size over a standard deviation: a learned
     # L close to a constant one (the canonical L of most systems) has a small (dL) L whose few
     # cancellations say nothing, while it is as close to a Poisson bivector as |J| is to |L|^2.
-    Ls2 = np.sum(Ls[: len(J)] ** 2, axis=(1, 2))
-    jac_to_L = relative(np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3))),
-                        3.0 * np.maximum(np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3))),
-                                         Ls2),
-                        "jacobi_residual_to_L", "L is zero at every state: it is Poisson")
+    jac_to_L = relative(nJ, 3.0 * np.maximum(nT, nL[: len(J)] ** 2), "jacobi_residual_to_L",
+                        "L is zero at every state: it is Poisson")
     eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
     nL_raw = np.linalg.norm(L, axis=(1, 2))
     asym = np.linalg.norm(L + np.swapaxes(L, 1, 2), axis=(1, 2)) / np.maximum(nL_raw, _TINY)

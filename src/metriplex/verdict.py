@@ -94,9 +94,9 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           L)L`: 0 for a Poisson bivector, 1 when the three
                                           cyclic terms do not cancel at all; against
                                           :math:`|L|^2` where L varies less than its size
-                                          (close to a constant L); an untrained
-                                          ``SkewMLPPoisson`` gives 0.2–0.3 for n = 3 and
-                                          about 0.5 for n = 5–8 (cannot tell)
+                                          (close to a constant L, as an untrained
+                                          ``SkewMLPPoisson`` is: 0.004–0.03, where
+                                          :math:`|J|/(3|T|)` gave 0.05–0.56) (cannot tell)
 ``entropy_production``     0.01           the fraction of the states along the structured
                                           model's rollouts where its own flow decreases its
                                           entropy by more than 1% of the fastest rate the
