@@ -101,9 +101,10 @@ def test_rollout_and_evaluate(oscillator_run, tmp_path):
     # A short reference training for the verdict: the keys written are checked here, the
     # verdict itself in test_verdict.py.
     res = run("evaluate", src / "run", src / "data.npz", "--out", tmp / "metrics.json",
-              "--verdict-steps", "100")
+              "--verdict-steps", "100", "--every", "2")
     assert res.returncode == 0, res.stderr
     m = json.loads((tmp / "metrics.json").read_text())
+    assert m["every"] == 2  # every second sample (the verdict's way round noise)
     for key in ("rollout_error", "rollout_error_mean", "energy_relative_drift", "entropy_min_step",
                 "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual", "verdict"):
         assert key in m, key

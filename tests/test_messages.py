@@ -410,6 +410,8 @@ def test_run_and_data_swapped(files, tmp_path):
 def test_evaluate_options(files, tmp_path):
     refused(run("evaluate", files / "run", files / "data.npz", "--verdict-steps", "0"),
             r"--verdict-steps must be >= 1 .*; got 0\. Pass --no-verdict")
+    refused(run("evaluate", files / "run", files / "data.npz", "--every", "0"),
+            r"--every must be a whole number >= 1 \(1: every sample\); got 0\.")
     refused(run("evaluate", files / "run", files / "data.npz", "--horizon", "-1"),
             r"--horizon must be a positive finite number; got -1\.0")
     refused(run("evaluate", files / "run", files / "data.npz", "--horizon", "nan"),

@@ -43,3 +43,16 @@ def test_graceful_degradation_with_noise():
     assert errors[0.0] < 0.06 and errors[1e-3] < 0.06, errors
     assert errors[1e-2] < 0.25, errors
     assert errors[1e-2] >= 0.5 * errors[0.0], errors
+
+
+def test_every_kth_sample_keeps_each_trajectory_from_its_first_state():
+    # What `metriplex evaluate --every K` evaluates on, where the verdict names noise.
+    data = mx.Trajectories.from_list([(np.arange(7.0), np.arange(7.0)[:, None]),
+                                      (0.5 * np.arange(4.0), -np.arange(4.0)[:, None])])
+    two = data.every(2)
+    assert list(two.lengths()) == [4, 2]
+    np.testing.assert_array_equal(two.t, [0, 2, 4, 6, 0, 1])
+    np.testing.assert_array_equal(two.x[:, 0], [0, 2, 4, 6, 0, -2])
+    np.testing.assert_array_equal(data.every(1).x, data.x)
+    with pytest.raises(mx.MetriplexError, match=r"k >= 1 .*got 0"):
+        data.every(0)

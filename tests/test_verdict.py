@@ -7,6 +7,7 @@ marked slow.
 """
 
 import contextlib
+import dataclasses
 import io
 import json
 
@@ -231,6 +232,15 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     v_in = verdict(model, pumped, report=report, reference=reference,
                    trained_on=mx.Units.from_data(pumped))
     assert v_in["outcome"] == NOT_CONSISTENT and _reasons(v_in)["training_range"]["passed"]
+    assert _reasons(v_in)["training_roughness"]["passed"] is True  # as rough as these data
+    # A model that learnt from data much rougher than these (noise: roughness 1) is not refuted
+    # by a residual within that roughness (audit: trained at 5% noise, judged on clean data,
+    # "not consistent" before).
+    noisy = dataclasses.replace(mx.Units.from_data(pumped), roughness=1.0)
+    v_noisy = verdict(model, pumped, report=report, reference=reference, trained_on=noisy)
+    rough = _reasons(v_noisy)["training_roughness"]
+    assert v_noisy["outcome"] == CANNOT_TELL and rough["passed"] is False, v_noisy["statement"]
+    assert rough["value"] > 2 and "train on data as clean as these" in v_noisy["statement"]
     d = np.std(pumped.x, axis=0)
     elsewhere = mx.Units(tuple(np.mean(pumped.x, axis=0) + 10 * d), tuple(d))
     v_out = verdict(model, pumped, report=report, reference=reference, trained_on=elsewhere)
@@ -293,6 +303,24 @@ def test_what_the_reference_leaves_of_smooth_dynamics_is_no_floor():
         "reference_residual_correlation"]  # it alone decides
     assert v["outcome"] == CANNOT_TELL, v["statement"]
     assert "it is dynamics that neither model has, not noise" in v["statement"]
+
+
+def test_roughness_is_one_for_noise_and_omega_dt_over_root_three_for_smooth_motion():
+    from metriplex.data import roughness
+
+    rng = np.random.default_rng(0)
+    t = np.arange(2000) * 0.01
+    noise = mx.Trajectories.from_list([(t, rng.normal(size=(2000, 2))) for _ in range(2)])
+    assert roughness(noise) == pytest.approx(1.0, abs=0.05)
+    smooth = np.stack([np.sin(3 * t), np.cos(3 * t)], -1)  # omega dt = 0.03
+    data = mx.Trajectories.from_list([(t, smooth)])
+    assert roughness(data) == pytest.approx(0.03 / np.sqrt(3), rel=0.01)
+    # Neither the unit of time nor the variables' units or offsets change it.
+    other = mx.Trajectories.from_list([(1000 * t, smooth * [1e-3, 1e4] + [5.0, -1e3])])
+    assert roughness(other) == pytest.approx(roughness(data), rel=1e-6)
+    assert mx.Units.from_data(data).roughness == pytest.approx(roughness(data))
+    # Too few neighbouring pairs to say.
+    assert roughness(mx.Trajectories.from_list([(t[:5], smooth[:5])])) is None
 
 
 def test_the_serial_correlation_of_residuals_tells_noise_from_dynamics():
@@ -590,9 +618,10 @@ def test_noise_on_the_states_is_named_where_the_reference_fails():
     from metriplex.verdict import Thresholds
 
     (noisy, _, _), _ = _residual_checks(0.39, 0.39, "", Thresholds(), correlation=-0.49)
-    assert noisy["passed"] is False and "evaluate on every k-th sample" in noisy["note"]
+    assert noisy["passed"] is False and "evaluate on every K-th sample" in noisy["note"]
+    assert "--every K" in noisy["note"]
     (other, _, _), _ = _residual_checks(0.39, 0.39, "", Thresholds(), correlation=0.6)
-    assert "every k-th sample" not in other["note"] and "--verdict-steps" in other["note"]
+    assert "every K-th sample" not in other["note"] and "--verdict-steps" in other["note"]
 
 
 def test_a_time_capped_training_is_told_to_take_more_time():

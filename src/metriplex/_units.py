@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .data import Pairs, Trajectories, observed_rates, time_scale
+from .data import Pairs, Trajectories, observed_rates, roughness, time_scale
 
 if TYPE_CHECKING:
     from .structure._abstract import AbstractFriction, AbstractPoisson, AbstractPotential
@@ -28,7 +28,11 @@ class Units:
 
     - ``shift``, ``scale``: per-variable mean :math:`c_i` and standard deviation :math:`d_i`;
     - ``time``: the time scale :math:`\tau` (:func:`time_scale`);
-    - ``energy``, ``entropy``: scales :math:`\sigma_E, \sigma_S` of the two potentials.
+    - ``energy``, ``entropy``: scales :math:`\sigma_E, \sigma_S` of the two potentials;
+    - ``roughness``: how much of the data's rates changes from pair to pair as noise does
+      (:func:`~metriplex.data.roughness`; ``None`` where unknown). The verdict compares it with
+      the data a model is judged on: a model that learnt from rougher data than those is not
+      refuted by fitting them less well than a field trained on them.
 
     In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
     :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
@@ -44,6 +48,7 @@ class Units:
     time: float = 1.0
     energy: float = 1.0
     entropy: float = 1.0
+    roughness: float | None = None
 
     @classmethod
     def from_data(cls, data: "Trajectories", *, poisson: AbstractPoisson | None = None,
@@ -84,7 +89,7 @@ class Units:
             size = _bivector_size(friction, x, d)
             if size is not None:
                 entropy_scale = 1.0 / (tau * size)
-        return cls(shift, scale, tau, float(energy), float(entropy_scale))
+        return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
         """How far the states ``x`` (rows) reach from these units' data: the largest

@@ -19,6 +19,13 @@ NOT_CONSISTENT = "not consistent"
 CANNOT_TELL = "cannot tell"
 
 
+#: The checks whose failure leaves the evidence unsound (cannot tell whatever else fails), and
+#: those that are symptoms of a misfit as much as a lack of evidence (verdict's ``_outcome``).
+_EVIDENCE = {"held_out_pairs", "training_converged", "reference_residual", "training_range",
+             "training_roughness"}
+_SYMPTOMS = {"rollout_failures", "step_sensitivity"}
+
+
 #: What a NOT-consistent statement adds: the two common causes, a model fitted to other data
 #: (a user's test set from other parameters) and, on data from a real system, a variable
 #: missing (a damped oscillator recorded in (q, p) alone is not GENERIC in those variables).
@@ -133,24 +140,6 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
     return reasons
 
 
-def _range_check(data, trained_on, th) -> list[dict[str, Any]]:
-    """``training_range``, where the units of the model's training data (``trained_on``) are
-    known: do ``data`` stay where the model was trained? Beyond, its residuals say how it
-    extrapolates, while the reference trains on these very data."""
-    if trained_on is None:
-        return []
-    far, _, var = trained_on.farthest(data.x)
-    passed = far <= th.training_range
-    note = (f"the data lie within {far:.2g} standard deviations of the training data's mean"
-            if passed else
-            f"the data reach states the model was never trained on ({data.names[var]} at "
-            f"{far:.2g} training standard deviations from its training mean): there the "
-            "structured model extrapolates while the reference trains on these data, so a "
-            "worse fit is no evidence against GENERIC; evaluate on data within the training "
-            "range, or train on these")
-    return [_reason("training_range", far, th.training_range, passed, CANNOT_TELL, note)]
-
-
 def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str,
                      th, correlation: float | None = None,
                      ) -> tuple[list[dict[str, Any]], float | None]:
@@ -177,8 +166,10 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
                         "residual comparison can blame neither the structure nor the data" + (
                             f"; its residuals alternate from one pair to the next (lag-one "
                             f"correlation {_fmt(correlation)}), the signature of noise on the "
-                            "recorded states: evaluate on every k-th sample (the steps' rates "
-                            "then rise above the noise; README, Noisy data)" if noisy else
+                            "recorded states: evaluate on every K-th sample (metriplex "
+                            "evaluate --every K: the steps' rates then rise above the noise), "
+                            "the largest K, doubling from 2, that keeps step_sensitivity under "
+                            "its limit (README, Noisy data)" if noisy else
                             " (too few trajectories to generalise from, noise, a coarse time "
                             "step, or too short a reference training: raise --verdict-steps)")))
     reference = _reason("reference_residual", rel_box, th.reference_residual, ref_pass,

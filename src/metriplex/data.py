@@ -83,6 +83,37 @@ def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -
     return float(np.exp(-np.mean(np.log(rate[moving]))))
 
 
+def roughness(data: "Trajectories", scale: np.ndarray | None = None,
+              rows: int = 1 << 16) -> float | None:
+    r"""How much of the data's observed rates changes from one pair to the next as noise does:
+    with :math:`v_k = D^{-1}(x_{k+1} - x_k)/\Delta t_k` the standardised rate of pair ``k``
+    (``scale`` :math:`D`, by default the data's standard deviations), the root of
+    :math:`\langle|v_{k+1} - v_k|^2\rangle / 3` over :math:`\langle(|v_k|^2 + |v_{k+1}|^2)/2
+    \rangle`, over neighbouring pairs of a trajectory.
+
+    White noise on the recorded states, larger than what the states move per step, gives 1;
+    smooth dynamics give about :math:`\omega\Delta t/\sqrt 3` for a motion of frequency
+    :math:`\omega` (so a coarser step is rougher too). No unit of time or state changes it.
+    ``None`` with fewer than 10 neighbouring pairs, or data that never move.
+    """
+    d = state_scale(data.x) if scale is None else np.asarray(scale, dtype=np.float64)
+    change = power = 0.0
+    count, total = 0, len(data.t)
+    for s in range(0, max(total - 2, 0), rows):  # neighbours (k, k + 1) for k in [s, e)
+        e = min(s + rows, total - 2)
+        x = np.asarray(data.x[s : e + 2], dtype=np.float64) / d[None, :]
+        v = (x[1:] - x[:-1]) / np.diff(np.asarray(data.t[s : e + 2], np.float64))[:, None]
+        tr = data.trajectory[s : e + 2]
+        ok = (tr[1:-1] == tr[:-2]) & (tr[2:] == tr[1:-1])
+        a, b = v[:-1][ok], v[1:][ok]
+        change += float(np.sum((b - a) ** 2))
+        power += 0.5 * float(np.sum(a * a) + np.sum(b * b))
+        count += int(ok.sum())
+    if count < 10 or not power > 0.0 or not np.isfinite(change):
+        return None
+    return float(np.sqrt(change / 3.0 / power))
+
+
 def observed_rates(pairs: "Pairs | Trajectories", rows: int = 1 << 16) -> Iterator[np.ndarray]:
     r"""The observed rates :math:`(x_{n+1} - x_n)/\Delta t_n` of every pair, in float64 blocks of
     at most ``rows`` pairs (so large data need no temporary copies of their size)."""
@@ -263,6 +294,18 @@ class Trajectories:
                 "choose among those."
             )
         return Trajectories(self.trajectory[m], self.t[m], self.x[m], self.names)
+
+    def every(self, k: int) -> "Trajectories":
+        """Every ``k``-th sample of each trajectory, from its first: pairs ``k`` samples apart,
+        whose rates rise ``k`` times further above noise on the recorded states (and whose
+        step resolves the dynamics ``k`` times less finely)."""
+        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+            raise MetriplexError(f"every takes a whole number of samples k >= 1 (1: every "
+                                 f"sample); got {k!r}.")
+        starts, counts = self._bounds()
+        position = np.arange(len(self.t)) - np.repeat(starts, counts)
+        keep = position % int(k) == 0
+        return Trajectories(self.trajectory[keep], self.t[keep], self.x[keep], self.names)
 
     def pairs(self, dtype: DTypeLike | None = None) -> Pairs:
         """Consecutive rows of the same trajectory, each with its own ``dt``; states in

@@ -83,6 +83,10 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           differences are what training budgets decide;
                                           or more than 3% and 5x the reference's own
                                           (``far_residual``, ``far_ratio``) (not consistent)
+``training_roughness``     2              with a failed residual ratio and ``trained_on``:
+                                          the training data were over twice as rough as
+                                          these (:func:`metriplex.data.roughness`) and the
+                                          residual here within that (cannot tell)
 ``degeneracy_L_gradS``     0.1            :math:`|L\nabla S|/(|L|_F|\nabla S|)` in
                                           standardised coordinates, 0 when exact; an
                                           antisymmetric L reaches at most
@@ -135,8 +139,8 @@ data scale), so none of them depends on the units of time, state, :math:`E` or :
 A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
-Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range`` or
-``reference_residual`` → **cannot tell**; else a failed ``residual_ratio`` → **not
+Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
+``training_roughness`` or ``reference_residual`` → **cannot tell**; else a failed ``residual_ratio`` → **not
 consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
 :func:`~metriplex._verdict_checks._far_beyond`); else any failed check → **cannot tell**;
@@ -167,9 +171,10 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
-                              NOT_CONSISTENT, NOT_POISSON, UNIDENTIFIED_SPLIT, _SPLIT_CHECKS,
-                              _fmt, _range_check, _residual_checks, _soundness_checks,
-                              _structure_checks, _violations, _far_beyond)
+                              NOT_CONSISTENT, NOT_POISSON, UNIDENTIFIED_SPLIT, _EVIDENCE,
+                              _SPLIT_CHECKS, _SYMPTOMS, _fmt, _residual_checks,
+                              _soundness_checks, _structure_checks, _violations, _far_beyond)
+from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroPotential
 
@@ -208,6 +213,7 @@ class Thresholds:
     far_residual: float = 0.03
     step_sensitivity: float = 0.1
     training_range: float = 6.0
+    training_roughness: float = 2.0
 
 
 def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
@@ -220,13 +226,11 @@ def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool 
     # a converged training's residual far beyond the reference's (_far_beyond) they are
     # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
     # conservative: ratio 37, "cannot tell" before).
-    evidence = {"held_out_pairs", "training_converged", "reference_residual", "training_range"}
-    symptoms = {"rollout_failures", "step_sensitivity"}
     misfit = any(r["name"] == "residual_ratio" for r in failed)
-    if any(r["name"] in evidence for r in failed) or (ratio is None):
+    if any(r["name"] in _EVIDENCE for r in failed) or (ratio is None):
         outcome = CANNOT_TELL
     elif misfit and ((converged is True and far)
-                     or not any(r["name"] in symptoms for r in failed)):
+                     or not any(r["name"] in _SYMPTOMS for r in failed)):
         outcome = NOT_CONSISTENT
     elif failed:
         outcome = CANNOT_TELL
@@ -333,7 +337,8 @@ def verdict(
                                 held_out=len(pairs.dt) if valid is not None else 0,
                                 fraction=reference.validation)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
-    reasons += compared + _range_check(data, trained_on, th)
+    reasons += compared + _training_checks(data, trained_on, rel_gen, th=th, misfit=any(
+        r["name"] == "residual_ratio" and r["passed"] is False for r in compared))
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     entropy_free = _learned(model.entropy) or isinstance(model.entropy, ZeroPotential)
     reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)

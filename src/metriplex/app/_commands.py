@@ -321,11 +321,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     chosen = _chosen_trajectories(args)
     _honour_model_dtype(args.run)
     model = load(args.run)
-    data = _read_data(args, chosen)
+    if args.every < 1:
+        raise MetriplexError(f"--every must be a whole number >= 1 (1: every sample); got "
+                             f"{args.every}.")
+    data = _read_data(args, chosen).every(args.every)
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
-                           solver=args.solver, progress=not args.quiet)
+                           solver=args.solver, progress=not args.quiet) | {"every": args.every}
     run = run_config(args.run)
     units = run.get("units") or {}
     for line in (time_unit_warning(units, data) + training_range_warning(units, data)

@@ -1,0 +1,69 @@
+"""The verdict's checks on the data a model was trained on (:func:`metriplex.verdict.verdict`
+with ``trained_on``, the :class:`~metriplex.Units` of the training data): do the judged data
+stay where the model was trained (``training_range``), and were the training data rougher
+than these (``training_roughness``)? Both make a misfit no evidence against the structure,
+since the black-box reference trains on the judged data themselves. ``th`` is the verdict's
+:class:`metriplex.verdict.Thresholds`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ._reference import _finite
+from ._verdict_checks import CANNOT_TELL, _fmt, _reason
+from .data import roughness
+
+
+def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
+                     th) -> list[dict[str, Any]]:
+    """The ``training_range`` and ``training_roughness`` entries (none without
+    ``trained_on``); ``misfit``: the residual ratio failed."""
+    if trained_on is None:
+        return []
+    return _range_check(data, trained_on, th) + _roughness_check(
+        data, trained_on, rel_gen, ratio_failed=misfit, th=th)
+
+
+def _range_check(data, trained_on, th) -> list[dict[str, Any]]:
+    """``training_range``, where the units of the model's training data (``trained_on``) are
+    known: do ``data`` stay where the model was trained? Beyond, its residuals say how it
+    extrapolates, while the reference trains on these very data."""
+    far, _, var = trained_on.farthest(data.x)
+    passed = far <= th.training_range
+    note = (f"the data lie within {far:.2g} standard deviations of the training data's mean"
+            if passed else
+            f"the data reach states the model was never trained on ({data.names[var]} at "
+            f"{far:.2g} training standard deviations from its training mean): there the "
+            "structured model extrapolates while the reference trains on these data, so a "
+            "worse fit is no evidence against GENERIC; evaluate on data within the training "
+            "range, or train on these")
+    return [_reason("training_range", far, th.training_range, passed, CANNOT_TELL, note)]
+
+
+def _roughness_check(data, trained_on, rel_gen: float | None, *, ratio_failed: bool,
+                     th) -> list[dict[str, Any]]:
+    """``training_roughness``, where the roughness of the model's training data is known
+    (``trained_on.roughness``): were they rougher than ``data`` (noisier, or sampled more
+    coarsely), so that a residual beyond the reference's, which trains on these data, is what
+    the model could learn rather than what its structure allows? Judged only where the
+    residual ratio failed (``ratio_failed``): a model that fits well needs no excuse."""
+    rough = trained_on.roughness
+    if rough is None:
+        return []
+    here = roughness(data)
+    value = None if not here else _finite(rough / here)
+    if not ratio_failed or value is None or rel_gen is None:
+        passed, note = None, (
+            "not judged: " + ("the residual ratio passes" if not ratio_failed
+                              else "these data's roughness is unknown"))
+    else:
+        passed = not (value > th.training_roughness and rel_gen <= rough)
+        note = (f"the training data's rates were {_fmt(rough)} rough (noise gives 1), these "
+                f"data's {_fmt(here)}" + ("" if passed else
+                f", and the structured model's residual here ({_fmt(rel_gen)}) is within the "
+                "training data's roughness: a model learnt from data that noisy (or that "
+                "coarsely sampled) need not fit these better, whatever its structure; train on "
+                "data as clean as these to decide"))
+    return [_reason("training_roughness", value, th.training_roughness, passed, CANNOT_TELL,
+                    note)]
