@@ -58,7 +58,7 @@ import jax.random as jr  # noqa: E402
 import numpy as np  # noqa: E402
 
 from metriplex.config import RunConfig, reversible_first_on  # noqa: E402
-from metriplex.data import state_scale, time_scale  # noqa: E402
+from metriplex.data import Trajectories, state_scale, time_scale  # noqa: E402
 from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.losses import SchemeResidual  # noqa: E402
@@ -192,10 +192,13 @@ def verdict_row(run: dict, test, config: RunConfig) -> dict:
 
 def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
              with_black_box: bool = False, trajectories: int | None = None,
-             horizon: float | None = None, with_verdict: bool = False) -> dict:
+             horizon: float | None = None, with_verdict: bool = False,
+             noise: float = 0.0) -> dict:
     """Train and test one zoo case (or a case built like one) with the defaults, ``overrides``
     and its flags; ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``);
-    ``with_verdict``: also evaluate's verdict on the test data (:func:`verdict_row`)."""
+    ``with_verdict``: also evaluate's verdict on the test data (:func:`verdict_row`);
+    ``noise``: Gaussian noise of this fraction of each variable's standard deviation on every
+    training state (one draw, numpy seed 5; the test data stay clean)."""
     system = case.system
     trajectories = case.trajectories if trajectories is None else trajectories
     t0 = time.perf_counter()
@@ -203,6 +206,10 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
                      seed=seed)
     test = generate(system, trajectories=case.test_trajectories, steps=case.horizon_steps,
                     dt=case.dt, seed=1000 + seed)
+    if noise:
+        spread = np.std(train.x, axis=0)
+        noisy = train.x + noise * spread * np.random.default_rng(5).normal(size=train.x.shape)
+        train = Trajectories(train.trajectory, train.t, noisy, train.names)
     gen_seconds = time.perf_counter() - t0
     config = dataclasses.replace(RunConfig(), **{**case.flags, **overrides})  # --set may replace a flag
     run = train_and_test(train, test, config, workdir / case.name, horizon=horizon)
@@ -230,6 +237,9 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "constant_drift": drift,
         # Above 1, train and evaluate warn: the rollouts make entropy the data do not show.
         "entropy_rise": report.get("entropy_rise_over_data_spread"),
+        # How far the learned E moves along the test data, over its spread there (0 for the
+        # true E of GENERIC data).
+        "energy_change": report.get("energy_change_along_data_over_spread"),
         "train_seconds": run["seconds"],
         "steps": history.step[-1] if history.step else 0,
         "kept_step": history.best_step,
@@ -237,6 +247,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "generalisation_gap": history.generalisation_gap(),
         "stopped": history.stopped,
         "converged": history.converged,
+        "every": (header.get("decided") or {}).get("every"),  # the pairs' spacing in samples
         # The held-out rollout score of the kept model (its validation trajectories, in units
         # of each variable's spread), and every training's where --repeats trained again.
         "held_out_score": history.best_rollout,
@@ -335,6 +346,9 @@ def main(argv=None) -> int:
                         "validation split is taken from them)")
     p.add_argument("--black-box", action="store_true",
                    help="also train an unconstrained field on the same data, for comparison")
+    p.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
+                   help="Gaussian noise of FRACTION of each variable's standard deviation on "
+                        "the training states (default 0; the test data stay clean)")
     p.add_argument("--verdict", action="store_true",
                    help="also give each trained model evaluate's verdict on the test data")
     args = p.parse_args(argv)
@@ -349,17 +363,21 @@ def main(argv=None) -> int:
     if args.held_out:
         cases = [c for c in cases if c.held_out]
     print(f"zoo benchmark: {len(cases)} cases, overrides {overrides or 'none'}, "
-          f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
+          + (f"noise {args.noise:g} on the training states, " if args.noise else "")
+          + f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for case in cases:
             row = run_case(case, overrides, Path(tmp), seed=args.seed,
                            with_black_box=args.black_box, trajectories=args.trajectories,
-                           with_verdict=args.verdict)
+                           with_verdict=args.verdict, noise=args.noise)
             rows.append(row)
             print(f"  {row['system']}: rel. L2 {_fmt(row['rel_l2'])}, standardised "
                   f"{_fmt(row['rel_l2_standardised'])}, failed {row['failed']}, "
-                  f"{row['train_seconds']:.0f} s ({row['stopped']})", flush=True)
+                  f"{row['train_seconds']:.0f} s ({row['stopped']}), pairs {row['every']} "
+                  f"samples apart, learned E moving "
+                  f"{'-' if row['energy_change'] is None else _fmt(row['energy_change'])} "
+                  "of its spread along the test data", flush=True)
     print()
     print_table(rows)
     if args.out:

@@ -54,5 +54,68 @@ def test_every_kth_sample_keeps_each_trajectory_from_its_first_state():
     np.testing.assert_array_equal(two.t, [0, 2, 4, 6, 0, 1])
     np.testing.assert_array_equal(two.x[:, 0], [0, 2, 4, 6, 0, -2])
     np.testing.assert_array_equal(data.every(1).x, data.x)
-    with pytest.raises(mx.MetriplexError, match=r"k >= 1 .*got 0"):
+    with pytest.raises(mx.MetriplexError, match=r"samples k must be an integer >= 1; got 0"):
         data.every(0)
+
+
+def test_interleaved_trajectories_pair_samples_k_apart_and_keep_every_sample():
+    data = mx.Trajectories.from_list([(np.arange(7.0), np.arange(7.0)[:, None]),
+                                      (0.5 * np.arange(4.0), -np.arange(4.0)[:, None])])
+    three = data.interleaved(3)
+    np.testing.assert_array_equal(three.ids, [0, 1, 2, 3])  # 3 * id + offset
+    # Every sample once, but for the second trajectory's samples 1 and 2: alone in their
+    # offsets, they pair with nothing.
+    assert sorted(three.x[:, 0]) == [-3, 0, 0, 1, 2, 3, 4, 5, 6]
+    np.testing.assert_array_equal(three.pairs().x1[:, 0] - three.pairs().x0[:, 0],
+                                  [3, 3, 3, 3, -3])  # pairs 3 samples apart, none across ids
+    np.testing.assert_array_equal(data.interleaved(1).x, data.x)
+
+
+def test_pair_spacing_is_one_on_smooth_motion_and_grows_with_noise():
+    from metriplex.data import pair_spacing, roughness
+
+    t = np.arange(400) * 0.02
+    clean = mx.Trajectories.from_list(
+        [(t, np.stack([np.sin(t + j), np.cos(t + j)], -1)) for j in range(4)])
+    assert pair_spacing(clean) == 1  # in any unit of time
+    assert pair_spacing(mx.Trajectories(clean.trajectory, 1e3 * clean.t, clean.x)) == 1
+    rng = np.random.default_rng(0)
+    chosen = []
+    for level in (0.01, 0.05):
+        noisy = mx.Trajectories(clean.trajectory, clean.t,
+                                clean.x + level * rng.normal(size=clean.x.shape))
+        k = pair_spacing(noisy)
+        # The spacing chosen is the least rough one, and rougher noise moves it further.
+        assert k > 1 and roughness(noisy.interleaved(k)) < roughness(noisy)
+        chosen.append(k)
+    assert chosen[1] > chosen[0]
+
+
+def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_path, capsys):
+    import json
+
+    from helpers import oscillator_data
+    from metriplex.runs import train_run
+    from metriplex.config import RunConfig
+
+    data = add_noise(oscillator_data(k=6, n_t=161), 0.05, seed=0)
+    config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=10, eval_every=10,
+                       float64=True, starts=1, repeats=1)
+    train_run(data, config, tmp_path / "run", validation_ids=[4, 5], progress=False)
+    header = json.loads((tmp_path / "run" / "config.json").read_text())
+    k = header["decided"]["every"]
+    assert k > 1 and "training uses pairs" in capsys.readouterr().err
+    # The split is of the file's trajectories; the roughness recorded is of the pairs trained on.
+    assert header["train_trajectories"] == [0, 1, 2, 3]
+    from metriplex.data import roughness
+    train = data.select([0, 1, 2, 3])
+    assert header["units"]["roughness"] == pytest.approx(
+        roughness(train.interleaved(k), np.asarray(header["units"]["scale"])))
+    assert header["units"]["roughness"] < roughness(train)
+    # Given (--every K), it is used without a note; K < 1 is refused before anything is read.
+    from metriplex.app._data_checks import spacing_note
+    from metriplex.app.config import validate
+
+    assert spacing_note(train, k, given=k) == [] and spacing_note(train, 1, given=None) == []
+    with pytest.raises(mx.MetriplexError, match=r"--every must be .*>= 1.*got 0"):
+        validate(RunConfig(every=0), 3)

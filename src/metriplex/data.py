@@ -15,7 +15,11 @@ from typing import TYPE_CHECKING, Any, Iterator, NamedTuple, Sequence
 import numpy as np
 
 from ._data_rules import checked_columns
-from ._errors import MetriplexError
+from ._errors import MetriplexError, expect_integer
+# How rough the observed rates are, and the pair spacing chosen by it; public from here.
+from ._roughness import SPACINGS as SPACINGS
+from ._roughness import pair_spacing as pair_spacing
+from ._roughness import roughness as roughness
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, DTypeLike
@@ -81,37 +85,6 @@ def time_scale(pairs: "Pairs | Trajectories", scale: np.ndarray | None = None) -
     if not np.any(moving) or not np.all(np.isfinite(rate)):
         return 1.0
     return float(np.exp(-np.mean(np.log(rate[moving]))))
-
-
-def roughness(data: "Trajectories", scale: np.ndarray | None = None,
-              rows: int = 1 << 16) -> float | None:
-    r"""How much of the data's observed rates changes from one pair to the next as noise does:
-    with :math:`v_k = D^{-1}(x_{k+1} - x_k)/\Delta t_k` the standardised rate of pair ``k``
-    (``scale`` :math:`D`, by default the data's standard deviations), the root of
-    :math:`\langle|v_{k+1} - v_k|^2\rangle / 3` over :math:`\langle(|v_k|^2 + |v_{k+1}|^2)/2
-    \rangle`, over neighbouring pairs of a trajectory.
-
-    White noise on the recorded states, larger than what the states move per step, gives 1;
-    smooth dynamics give about :math:`\omega\Delta t/\sqrt 3` for a motion of frequency
-    :math:`\omega` (so a coarser step is rougher too). No unit of time or state changes it.
-    ``None`` with fewer than 10 neighbouring pairs, or data that never move.
-    """
-    d = state_scale(data.x) if scale is None else np.asarray(scale, dtype=np.float64)
-    change = power = 0.0
-    count, total = 0, len(data.t)
-    for s in range(0, max(total - 2, 0), rows):  # neighbours (k, k + 1) for k in [s, e)
-        e = min(s + rows, total - 2)
-        x = np.asarray(data.x[s : e + 2], dtype=np.float64) / d[None, :]
-        v = (x[1:] - x[:-1]) / np.diff(np.asarray(data.t[s : e + 2], np.float64))[:, None]
-        tr = data.trajectory[s : e + 2]
-        ok = (tr[1:-1] == tr[:-2]) & (tr[2:] == tr[1:-1])
-        a, b = v[:-1][ok], v[1:][ok]
-        change += float(np.sum((b - a) ** 2))
-        power += 0.5 * float(np.sum(a * a) + np.sum(b * b))
-        count += int(ok.sum())
-    if count < 10 or not power > 0.0 or not np.isfinite(change):
-        return None
-    return float(np.sqrt(change / 3.0 / power))
 
 
 def observed_rates(pairs: "Pairs | Trajectories", rows: int = 1 << 16) -> Iterator[np.ndarray]:
@@ -299,13 +272,28 @@ class Trajectories:
         """Every ``k``-th sample of each trajectory, from its first: pairs ``k`` samples apart,
         whose rates rise ``k`` times further above noise on the recorded states (and whose
         step resolves the dynamics ``k`` times less finely)."""
-        if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-            raise MetriplexError(f"every takes a whole number of samples k >= 1 (1: every "
-                                 f"sample); got {k!r}.")
+        k = expect_integer(k, what="the number of samples k", least=1,
+                           fix="1 keeps every sample.")
         starts, counts = self._bounds()
         position = np.arange(len(self.t)) - np.repeat(starts, counts)
         keep = position % int(k) == 0
         return Trajectories(self.trajectory[keep], self.t[keep], self.x[keep], self.names)
+
+    def interleaved(self, k: int) -> "Trajectories":
+        """Each trajectory as ``k`` interleaved ones, the ``j``-th holding its samples ``j, j +
+        k, j + 2k, ...`` with id ``k * id + j``: pairs ``k`` samples apart, every sample still
+        used, but for a trajectory's lone samples (fewer than ``k`` samples at its end)
+        (:func:`pair_spacing` chooses ``k`` for noisy data)."""
+        kept = self.every(k)  # checks k
+        if k == 1:
+            return kept
+        starts, counts = self._bounds()
+        offset = (np.arange(len(self.t)) - np.repeat(starts, counts)) % k
+        ids = self.trajectory.astype(np.int64) * k + offset
+        _, back, count = np.unique(ids, return_inverse=True, return_counts=True)
+        order = np.argsort(ids, kind="stable")
+        order = order[count[back][order] > 1]  # a lone sample pairs with nothing
+        return Trajectories(ids[order], self.t[order], self.x[order], self.names)
 
     def pairs(self, dtype: DTypeLike | None = None) -> Pairs:
         """Consecutive rows of the same trajectory, each with its own ``dt``; states in

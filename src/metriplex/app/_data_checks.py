@@ -207,3 +207,20 @@ def operators_note(path: str | Path, poisson: str, friction: str) -> list[str]:
             "which this run learns instead; "
             + " ".join(f"{f} file:{path}" for _, f in unused) + " would use "
             + ("them" if len(unused) > 1 else "it") + " as given."]
+
+
+def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[str]:
+    """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
+    ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
+    them."""
+    from ..data import roughness, state_scale
+
+    if given is not None or spacing == 1:
+        return []
+    d = state_scale(train.x)
+    near, apart = roughness(train, d), roughness(train.interleaved(spacing), d)
+    return [f"note: the training data's rates change from one pair to the next as noise on the "
+            f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
+            f"gives 1; {apart:.2g} between samples {spacing} apart): training uses pairs "
+            f"{spacing} samples apart (each trajectory as {spacing} interleaved ones, every "
+            "sample still used; README, Noisy data). --every 1 trains on neighbouring samples."]

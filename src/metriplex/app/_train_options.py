@@ -133,6 +133,11 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
                    "not with --input-noise, --data-parallel, --window-steps or "
                    "--degeneracy-at midpoints, which keep independent pairs "
                    f"(default {d.consecutive}; 1 for independent pairs)")
+    w.add_argument("--every", type=int, metavar="K", help="train on pairs K samples apart, "
+                   "each training trajectory as K interleaved ones (every sample still used; "
+                   "validation unchanged); default: the K of 1, 2, 3, 4, 6, 8, 12, 16 at which "
+                   "the training data's rates are least rough, 1 for smooth motion, larger with "
+                   "noise on the states (README, Noisy data)")
     w.add_argument("--window-steps", type=int, metavar="K", help="also train on rollouts "
                    "of K steps from the first states of 32 training pairs per batch, against "
                    "the data that follow them: errors that compound over a rollout are "

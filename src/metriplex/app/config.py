@@ -111,6 +111,7 @@ class RunConfig:
     input_noise: float = 0.0
     jitter_constants: bool = True
     consecutive: int = 1
+    every: int | None = None
     window_steps: int = 0
     residual_metric: str = "auto"
     average_steps: int = 500
@@ -250,6 +251,11 @@ def validate(config: RunConfig, n: int) -> None:
                                             "the parameters spans")):
         expect_integer(getattr(config, name), least=0, what=f"--{name.replace('_', '-')}",
                        fix=f"It counts {meaning}; 0 turns it off.")
+    if config.every is not None:
+        expect_integer(config.every, least=1, what="--every",
+                       fix="It counts the samples between the two states of a training pair; "
+                           "1 trains on neighbouring samples (leave it out to choose it from "
+                           "the data).")
     if config.starts is not None:
         expect_integer(config.starts, least=1, what="--starts",
                        fix="It counts the initialisations tried before the best is trained; "

@@ -30,11 +30,11 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
-from ._data_checks import data_notes
+from ._data_checks import data_notes, spacing_note
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
-from ..data import Trajectories
+from ..data import Trajectories, pair_spacing
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
 
@@ -250,9 +250,11 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 "Repeat the original options (config.json in the run folder lists them), or "
                 "start a new run (--overwrite)."
             )
-    train, valid, data_info, validation_by = parts
+    given_train, valid, data_info, validation_by = parts
     if resume:
-        _check_resume(run_config(out), data_info, train, valid)
+        _check_resume(run_config(out), data_info, given_train, valid)
+    spacing = config.every or pair_spacing(given_train)
+    train = given_train.interleaved(spacing)
     model_key, fit_key = jr.split(jr.key(config.seed))
     given = Given.of(config, train.n)  # a file: L or M read once
     units = units_for(config, train, given)
@@ -260,8 +262,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
-    for line in ([] if resume else data_notes(train, valid, config.entropy, free)) + \
-            said.getvalue().splitlines():
+    for line in ([] if resume else data_notes(given_train, valid, config.entropy, free)
+                 + spacing_note(given_train, spacing, config.every)) + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
@@ -276,10 +278,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
-                    "repeats": repeats},
+                    "repeats": repeats, "every": spacing},
         "names": list(train.names),
         "n": train.n,
-        "train_trajectories": [int(i) for i in train.ids],
+        "train_trajectories": [int(i) for i in given_train.ids],
         "validation_trajectories": [] if valid is None else [int(i) for i in valid.ids],
         # "ids": given (--validation-ids, --split); "fraction": config.validation of them at
         # random (config.seed), or the last samples of a single trajectory.
@@ -322,7 +324,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         **{f"train_{k}": np.asarray(v) for k, v in history.train.items()},
         **{f"valid_{k}": np.asarray(v) for k, v in history.valid.items()},
     )
-    return model, history, train, valid, seconds
+    return model, history, given_train, valid, seconds
 
 
 def run_config(run_dir: str | Path) -> dict:
