@@ -253,7 +253,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     given_train, valid, data_info, validation_by = parts
     if resume:
         _check_resume(run_config(out), data_info, given_train, valid)
-    spacing = config.every or pair_spacing(given_train)
+    # A resumed run keeps the spacing it trained with (1 in a run from before the choice).
+    spacing = config.every or ((run_config(out).get("decided") or {}).get("every", 1) if resume
+                               else pair_spacing(given_train))
     train = given_train.interleaved(spacing)
     model_key, fit_key = jr.split(jr.key(config.seed))
     given = Given.of(config, train.n)  # a file: L or M read once
