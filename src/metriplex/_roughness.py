@@ -1,6 +1,6 @@
-"""How rough the observed rates of trajectory data are (:func:`roughness`), and the spacing of
-training pairs that makes them least rough (:func:`pair_spacing`); public from
-:mod:`metriplex.data`."""
+"""How rough the observed rates of trajectory data are (:func:`roughness`), the spacing of
+training pairs that makes them least rough (:func:`pair_spacing`), and the noise on the
+recorded states (:func:`state_noise`); public from :mod:`metriplex.data`."""
 
 from __future__ import annotations
 
@@ -87,3 +87,22 @@ def pair_spacing(data: _Samples, spacings: Sequence[int] = SPACINGS) -> int:
             if r is not None and r < least:
                 best, least = k, r
     return best
+
+
+def state_noise(data: _Samples) -> np.ndarray:
+    r"""Each variable's noise, an estimate of the standard deviation of white noise on its
+    recorded states, from the third differences
+    :math:`\Delta^3 x_k = x_{k+3} - 3x_{k+2} + 3x_{k+1} - x_k` along the trajectories:
+    :math:`\sqrt{\langle(\Delta^3 x)^2\rangle/20}` (white noise of variance
+    :math:`\sigma^2` gives :math:`20\sigma^2`; smooth motion adds only its third derivative
+    times :math:`\Delta t^3`, so on clean data this is an upper bound far below the motion).
+    Zeros where no trajectory has four samples."""
+    x = np.asarray(data.x, dtype=np.float64)
+    tr = data.trajectory
+    if len(x) < 4:
+        return np.zeros(x.shape[1])
+    same = (tr[3:] == tr[:-3])  # the four samples of one trajectory (rows are grouped by id)
+    third = (x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3])[same]
+    if not len(third):
+        return np.zeros(x.shape[1])
+    return np.sqrt(np.mean(third**2, axis=0) / 20.0)

@@ -20,6 +20,7 @@ from ._errors import MetriplexError, expect_integer
 from ._roughness import SPACINGS as SPACINGS
 from ._roughness import pair_spacing as pair_spacing
 from ._roughness import roughness as roughness
+from ._roughness import state_noise as state_noise
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, DTypeLike

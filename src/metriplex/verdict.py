@@ -148,9 +148,9 @@ else **consistent**. The command line's ``metriplex evaluate --strict`` exits wi
 :data:`EXIT_STATUS` of the outcome (0 consistent, 1 not consistent, 3 cannot tell).
 
 With **not consistent**, the report also names what the observed data do under the learned
-:math:`E` and :math:`S` (measured on the data's own pairs, not on any fitted field): the
-learned energy changing along the observed flow (first law), the learned entropy decreasing
-(second law), and the variables the structure cannot fit. The verdict holds for the structure
+:math:`E` and :math:`S` (measured on the data's own pairs beyond what noise on the states
+gives, not on any fitted field): the learned energy changing along the observed flow (first
+law), the learned entropy decreasing (second law), and the variables the structure cannot fit. The verdict holds for the structure
 that was fitted: with ``S = s`` given, data whose ``s`` decreases are not GENERIC, even though
 another entropy might exist.
 """
