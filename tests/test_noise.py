@@ -87,6 +87,9 @@ def test_pair_spacing_is_one_on_smooth_motion_and_grows_with_noise():
         k = pair_spacing(noisy)
         # The spacing chosen is the least rough one, and rougher noise moves it further.
         assert k > 1 and roughness(noisy.interleaved(k)) < roughness(noisy)
+        # Measured on the data themselves, pairs k apart are those of the interleaved data.
+        assert roughness(noisy, spacing=k) == pytest.approx(
+            roughness(noisy.interleaved(k), np.std(noisy.x, axis=0)), rel=1e-12)
         chosen.append(k)
     assert chosen[1] > chosen[0]
 

@@ -19,16 +19,15 @@ class _Samples(Protocol):
 
     def lengths(self) -> np.ndarray: ...
 
-    def interleaved(self, k: int) -> "_Samples": ...
 
-
-def roughness(data: _Samples, scale: np.ndarray | None = None,
+def roughness(data: _Samples, scale: np.ndarray | None = None, spacing: int = 1,
               rows: int = 1 << 16) -> float | None:
     r"""How much of the data's observed rates changes from one pair to the next as noise does:
     with :math:`v_k = D^{-1}(x_{k+1} - x_k)/\Delta t_k` the standardised rate of pair ``k``
     (``scale`` :math:`D`, by default each variable's standard deviation), the root of
     :math:`\langle|v_{k+1} - v_k|^2\rangle / 3` over :math:`\langle(|v_k|^2 + |v_{k+1}|^2)/2
-    \rangle`, over neighbouring pairs of a trajectory.
+    \rangle`, over neighbouring pairs of a trajectory. With ``spacing`` ``k`` > 1, of pairs
+    ``k`` samples apart (those of ``data.interleaved(k)``).
 
     White noise on the recorded states, larger than what the states move per step, gives 1;
     smooth dynamics give about :math:`\omega\Delta t/\sqrt 3` for a motion of frequency
@@ -36,15 +35,17 @@ def roughness(data: _Samples, scale: np.ndarray | None = None,
     ``None`` with fewer than 10 neighbouring pairs, or data that never move.
     """
     d = _spread(data.x) if scale is None else np.asarray(scale, dtype=np.float64)
+    k = spacing
     change = power = 0.0
     count, total = 0, len(data.t)
-    for s in range(0, max(total - 2, 0), rows):  # neighbours (k, k + 1) for k in [s, e)
-        e = min(s + rows, total - 2)
-        x = np.asarray(data.x[s : e + 2], dtype=np.float64) / d[None, :]
-        v = (x[1:] - x[:-1]) / np.diff(np.asarray(data.t[s : e + 2], np.float64))[:, None]
-        tr = data.trajectory[s : e + 2]
-        ok = (tr[1:-1] == tr[:-2]) & (tr[2:] == tr[1:-1])
-        a, b = v[:-1][ok], v[1:][ok]
+    for s in range(0, max(total - 2 * k, 0), rows):  # pairs (r, r + k), (r + k, r + 2k)
+        e = min(s + rows, total - 2 * k)  # for r in [s, e)
+        x = np.asarray(data.x[s : e + 2 * k], dtype=np.float64) / d[None, :]
+        t = np.asarray(data.t[s : e + 2 * k], dtype=np.float64)
+        v = (x[k:] - x[:-k]) / (t[k:] - t[:-k])[:, None]
+        tr = data.trajectory[s : e + 2 * k]
+        ok = tr[: e - s] == tr[2 * k :]  # rows are grouped by trajectory
+        a, b = v[: e - s][ok], v[k:][ok]
         change += float(np.sum((b - a) ** 2))
         power += 0.5 * float(np.sum(a * a) + np.sum(b * b))
         count += int(ok.sum())
@@ -83,7 +84,7 @@ def pair_spacing(data: _Samples, spacings: Sequence[int] = SPACINGS) -> int:
         return 1
     for k in spacings:
         if k > 1 and length / k >= 8:
-            r = roughness(data.interleaved(k), d)
+            r = roughness(data, d, spacing=k)
             if r is not None and r < least:
                 best, least = k, r
     return best

@@ -218,7 +218,7 @@ def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[s
     if given is not None or spacing == 1:
         return []
     d = state_scale(train.x)
-    near, apart = roughness(train, d), roughness(train.interleaved(spacing), d)
+    near, apart = roughness(train, d), roughness(train, d, spacing=spacing)
     return [f"note: the training data's rates change from one pair to the next as noise on the "
             f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart): training uses pairs "
