@@ -236,8 +236,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         jax.config.update("jax_enable_x64", True)
     dtype = jnp.float64 if config.float64 else jnp.float32
     _prepare_dir(out, overwrite=overwrite, resume=resume)
+    saved = run_config(out) if resume else {}  # the interrupted run's config.json
     if resume:
-        stored = run_config(out).get("config")
+        stored = saved.get("config")
         if stored is None:
             raise MetriplexError(
                 f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
@@ -252,9 +253,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
             )
     given_train, valid, data_info, validation_by = parts
     if resume:
-        _check_resume(run_config(out), data_info, given_train, valid)
+        _check_resume(saved, data_info, given_train, valid)
     # A resumed run keeps the spacing it trained with (1 in a run from before the choice).
-    spacing = config.every or ((run_config(out).get("decided") or {}).get("every", 1) if resume
+    spacing = config.every or ((saved.get("decided") or {}).get("every", 1) if resume
                                else pair_spacing(given_train))
     train = given_train.interleaved(spacing)
     model_key, fit_key = jr.split(jr.key(config.seed))
