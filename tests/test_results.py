@@ -547,3 +547,17 @@ def test_evaluate_reports_how_far_the_learned_energy_moves_along_the_data():
                              truth.poisson, truth.friction)
     moved = mx.evaluate(tilted, data, scheme=mx.RK4(), step_check=False)
     assert moved["energy_change_along_data_over_spread"] > 0.05
+    # Only beyond noise on the data: with 5 % noise the true E spans 7 % of its spread over
+    # the data along a trajectory of 100 states, noise alone.
+    from metriplex.data import range_beyond_noise
+
+    longer = systems.generate(system, trajectories=3, steps=100, seed=0)
+    rng = np.random.default_rng(0)
+    noisy = mx.Trajectories(longer.trajectory, longer.t, longer.x + 0.05 * np.std(
+        longer.x, axis=0) * rng.normal(size=longer.x.shape))
+    report = mx.evaluate(truth, noisy, scheme=mx.RK4(), step_check=False)
+    assert report["energy_change_along_data_over_spread"] < 0.05
+    E = np.asarray([float(truth.energy(x)) for x in noisy.x[:101]])
+    assert np.ptp(E) > 0.05 * np.ptp([float(truth.energy(x)) for x in noisy.x])  # noise is there
+    assert range_beyond_noise(E) < 0.2 * np.ptp(E)
+    assert 0.85 < range_beyond_noise(np.linspace(0.0, 1.0, 100)) < 0.95  # a drift: most of it

@@ -1,6 +1,7 @@
 """How rough the observed rates of trajectory data are (:func:`roughness`), the spacing of
 training pairs that makes them least rough (:func:`pair_spacing`), and the noise on the
-recorded states (:func:`state_noise`); public from :mod:`metriplex.data`."""
+recorded states (:func:`state_noise`) and the range of a quantity along a trajectory beyond
+it (:func:`range_beyond_noise`); public from :mod:`metriplex.data`."""
 
 from __future__ import annotations
 
@@ -107,3 +108,25 @@ def state_noise(data: _Samples) -> np.ndarray:
     if not len(third):
         return np.zeros(x.shape[1])
     return np.sqrt(np.mean(third**2, axis=0) / 20.0)
+
+
+def range_beyond_noise(series: np.ndarray, parts: int = 10) -> float:
+    r"""How far a quantity moves along one trajectory (``series``, its values there) beyond
+    white noise on it: the range of its means over ``parts`` consecutive stretches (at most one
+    per value), less the range that noise alone gives such means,
+    :math:`2\sqrt{2\ln m}\,\sigma/\sqrt{n}` for :math:`m` stretches of at least :math:`n`
+    values, :math:`\sigma` from the third differences as in :func:`state_noise`; never below 0.
+    On smooth values, the range of the stretches' means: about 90 % of a steady drift. The
+    true energy of a damped oscillator's GENERIC data with 5 % noise on the states (8
+    trajectories of 200 states) spans up to 23 % of its spread along one, noise alone; this
+    leaves 0."""
+    v = np.asarray(series, dtype=np.float64)
+    if len(v) < 4:
+        return float(np.ptp(v)) if len(v) else 0.0
+    third = v[3:] - 3 * v[2:-1] + 3 * v[1:-2] - v[:-3]
+    sigma = float(np.sqrt(np.mean(third**2) / 20.0))
+    stretches = np.array_split(v, min(parts, len(v)))
+    means = np.array([s.mean() for s in stretches])
+    least = min(len(s) for s in stretches)
+    noise = 2.0 * np.sqrt(2.0 * np.log(len(stretches))) * sigma / np.sqrt(least)
+    return max(float(np.ptp(means)) - noise, 0.0)

@@ -19,6 +19,7 @@ from ._errors import MetriplexError, expect_integer
 # How rough the observed rates are, and the pair spacing chosen by it; public from here.
 from ._roughness import SPACINGS as SPACINGS
 from ._roughness import pair_spacing as pair_spacing
+from ._roughness import range_beyond_noise as range_beyond_noise
 from ._roughness import roughness as roughness
 from ._roughness import state_noise as state_noise
 

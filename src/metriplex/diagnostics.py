@@ -7,8 +7,8 @@ One set of functions judges ground-truth systems and learned models alike:
   predicting no motion at all, :math:`x(t) = x(0)`, which a model must beat to predict anything
   (``constant_prediction_error_mean``);
 - the energy's relative drift along the model's own rollout (to the larger of :math:`|E(x_0)|`
-  and E's spread over the data, as its offset is arbitrary), and along the observed data, which
-  GENERIC data keep constant (``energy_change_along_data_over_spread``); the entropy's steps;
+  and E's spread over the data, as its offset is arbitrary), and beyond noise along the data,
+  which GENERIC data keep constant (``energy_change_along_data_over_spread``); entropy steps;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
   factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
 - the sign of the entropy production :math:`\dot S = \nabla S\cdot\dot x` at the states along
@@ -46,7 +46,7 @@ from ._entropy_production import (  # noqa: F401 (re-exported)
 from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import identified, structure_residuals
-from .data import Trajectories, check_width, state_scale
+from .data import Trajectories, check_width, range_beyond_noise, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, model_size, solve
 from ._progress import progress_bar
@@ -276,9 +276,9 @@ def evaluate(
         "energy_drift_over_data_spread": known(
             float(np.max(drifts_gauge)) if drifts_gauge else None,
             "energy_drift_over_data_spread", no_steps),
-        # The most the learned E moves along an observed trajectory, in units of its spread.
-        "energy_change_along_data_over_spread": known(float(max(
-            np.ptp(E_data[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
+        # The most the learned E moves along an observed trajectory beyond noise, over its spread.
+        "energy_change_along_data_over_spread": known(float(max(range_beyond_noise(
+            E_data[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
             "energy_change_along_data_over_spread", "the learned E is not finite at the data"),
         "entropy_min_step": known(float(np.min(dS_min)) if dS_min else None,
                                   "entropy_min_step", no_steps),
