@@ -1,5 +1,7 @@
 """Training on noisy data degrades gracefully (the CN pair loss needs no derivatives of data)."""
 
+import re
+
 import jax.random as jr
 import numpy as np
 import pytest
@@ -107,7 +109,10 @@ def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_pat
     train_run(data, config, tmp_path / "run", validation_ids=[4, 5], progress=False)
     header = json.loads((tmp_path / "run" / "config.json").read_text())
     k = header["decided"]["every"]
-    assert k > 1 and "training uses pairs" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert k > 1 and f"training uses pairs {k} samples apart" in err
+    # It says how noisy the states are: 5 % of each variable's standard deviation here.
+    assert 4.0 < float(re.search(r"the noise is about ([0-9.]+)% of a variable", err)[1]) < 6.0
     # The split is of the file's trajectories; the roughness recorded is of the pairs trained on.
     assert header["train_trajectories"] == [0, 1, 2, 3]
     from metriplex.data import roughness
