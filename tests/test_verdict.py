@@ -637,6 +637,25 @@ def test_the_checks_on_S_and_M_do_not_apply_where_the_friction_never_acts():
         assert given[name]["passed"] is False and acting[name]["passed"] is False
 
 
+def test_a_consistent_fit_by_l_grad_e_alone_says_it_identifies_no_dissipation():
+    # A damped system recorded with its bath, nothing given, was fitted by L grad E alone and
+    # called consistent with nothing said of its dissipation (audit 10). Here the flow is
+    # conservative, so the fit is exact; with S learned and M = 0 the statement says what the
+    # fit cannot tell, and with S given it does not.
+    data = _oscillator_data(lambda x: np.stack([x[..., 1], -x[..., 0], 0.0 * x[..., 2]], -1),
+                            12, 0)
+    reference = train_reference(data, steps=STEPS, width=16)
+    energy = mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2) + x[2])
+    learned_s = mx.MLPPotential(3, width=8, data=data.x, key=jr.key(0))
+    from metriplex._verdict_checks import REVERSIBLE_ONLY
+
+    for entropy, said in ((learned_s, True), (mx.SumOf((2,)), False)):
+        model = mx.GenericModel(energy, entropy, mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+        v = verdict(model, data, reference=reference, converged=True, stopped="converged")
+        assert v["outcome"] == CONSISTENT, v["statement"]
+        assert (REVERSIBLE_ONLY in v["statement"]) is said
+
+
 def test_noise_on_the_states_is_named_where_the_reference_fails():
     from metriplex._verdict_checks import _residual_checks
     from metriplex.verdict import Thresholds

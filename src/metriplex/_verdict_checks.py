@@ -316,13 +316,30 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
         "share of the motion at the data's states that L grad E drives (the rest is M grad S)"
         + (": friction carries the motion, which any flow whose entropy grows admits, so the "
            "fit does not identify E" if share < th.reversible_share else "")))
-    if entropy_free and share is not None and share >= 1.0 - INERT_FRICTION:
+    if _reversible_only(sr, entropy_free):
         inert = (f"not needed: the friction drives none of the motion (L grad E drives "
                  f"{share:.9g} of it), so the flow is L grad E alone, GENERIC with S constant; "
                  "the learned S and M play no part")
         reasons = [_reason(r["name"], None, r["threshold"], None, CANNOT_TELL, inert)
                    if r["name"] in _ENTROPY_AND_FRICTION else r for r in reasons]
     return reasons
+
+
+#: What a "consistent" adds where S is learned and the friction drives none of the motion
+#: (:func:`_reversible_only`): a damped system recorded with its heat bath was fitted by L grad
+#: E alone, "consistent" with nothing said of its dissipation (a new-user check, audit 10).
+REVERSIBLE_ONLY = ("The fit is reversible: L grad E drives all of the motion and the learned "
+                   "friction none, which any flow that conserves the learned E admits (a damped "
+                   "system with its heat bath recorded, too), so it identifies neither "
+                   "dissipation nor an entropy. Where the data dissipate, give what is known "
+                   "(the entropy variables, --entropy sum:I,J) to learn the split.")
+
+
+def _reversible_only(sr: dict[str, Any], entropy_free: bool) -> bool:
+    """Whether S is learned (or zero) and the friction drives none of the motion (share of
+    L grad E at least ``1 - INERT_FRICTION``): the flow is then L grad E alone."""
+    share = sr.get("reversible_share")
+    return entropy_free and share is not None and share >= 1.0 - INERT_FRICTION
 
 
 #: The structure checks on S and M, which a friction that never acts makes moot.

@@ -165,15 +165,15 @@ import numpy as np
 from ._precision import in_full_precision
 from ._errors import MetriplexError
 from ._model import GenericModel, float_dtype, weights
-# The black-box reference and the measurements on the held-out pairs; BlackBoxModel, Reference
-# and train_reference are importable from here as before.
+# The black-box reference and the held-out measurements (BlackBoxModel, ... public from here).
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          _serial_correlation, train_reference)
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
-                              NOT_CONSISTENT, NOT_POISSON, UNIDENTIFIED_SPLIT, _EVIDENCE,
-                              _SPLIT_CHECKS, _SYMPTOMS, _fmt, _residual_checks,
-                              _soundness_checks, _structure_checks, _violations, _far_beyond)
+                              NOT_CONSISTENT, NOT_POISSON, REVERSIBLE_ONLY, UNIDENTIFIED_SPLIT,
+                              _EVIDENCE, _SPLIT_CHECKS, _SYMPTOMS, _fmt, _residual_checks,
+                              _reversible_only, _soundness_checks, _structure_checks,
+                              _violations, _far_beyond)
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroPotential
@@ -363,7 +363,8 @@ def verdict(
                          "" if converged is not None else " How training ended was not given "
                          "(history=): a model still improving would be 'cannot tell'.") + (
                          " " + sr["identified"]["statement"][0].upper()
-                         + sr["identified"]["statement"][1:]))
+                         + sr["identified"]["statement"][1:]) + (
+                         " " + REVERSIBLE_ONLY if _reversible_only(sr, entropy_free) else ""))
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
