@@ -134,3 +134,24 @@ def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_pat
     assert spacing_note(train, k, given=k) == [] and spacing_note(train, 1, given=None) == []
     with pytest.raises(mx.MetriplexError, match=r"--every must be .*>= 1.*got 0"):
         validate(RunConfig(every=0), 3)
+
+
+def test_trains_final_line_says_its_error_includes_the_noise_of_the_validation_states(tmp_path):
+    # At 5 % noise the held-out error on train's last line read 2x the clean-test one, unsaid
+    # (audit 10).
+    from helpers import oscillator_data
+    from metriplex.app._summary import train_summary
+    from metriplex.data import noise_level
+    from metriplex.train import History
+
+    clean = oscillator_data(k=4, n_t=200)
+    noisy = add_noise(clean, 0.05, seed=1)
+    assert noise_level(clean) < 0.001 and noise_level(noisy) == pytest.approx(0.05, rel=0.2)
+    metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 0.1,
+               "evaluated_on": "validation trajectories"}
+    line = train_summary(History(), {**metrics, "noise_over_spread": noise_level(noisy)}, 1.0,
+                         tmp_path)
+    assert "whose noise (about 5." in line and "includes" in line
+    quiet = train_summary(History(), {**metrics, "noise_over_spread": noise_level(clean)}, 1.0,
+                          tmp_path)
+    assert "noise" not in quiet

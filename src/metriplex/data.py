@@ -18,6 +18,7 @@ from ._data_rules import checked_columns
 from ._errors import MetriplexError, expect_integer
 # How rough the observed rates are, and the pair spacing chosen by it; public from here.
 from ._roughness import SPACINGS as SPACINGS
+from ._roughness import noise_level as noise_level
 from ._roughness import pair_spacing as pair_spacing
 from ._roughness import range_beyond_noise as range_beyond_noise
 from ._roughness import roughness as roughness

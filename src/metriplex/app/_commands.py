@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from .._errors import MetriplexError
+from ..data import noise_level
 from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
@@ -154,7 +155,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["evaluated_on"] = (
             "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
-        metrics["stopped"] = history.stopped
+        metrics["stopped"], metrics["noise_over_spread"] = history.stopped, noise_level(target)
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,

@@ -213,13 +213,13 @@ def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[s
     """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
     ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
     them."""
-    from ..data import roughness, state_noise, state_scale
+    from ..data import noise_level, roughness, state_scale
 
     if given is not None or spacing == 1:
         return []
     d = state_scale(train.x)
     near, apart = roughness(train, d), roughness(train, d, spacing=spacing)
-    noise = float(np.median(state_noise(train) / d))
+    noise = noise_level(train)
     return [f"note: the training data's rates change from one pair to the next as noise on the "
             f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart; the noise is about "

@@ -13,6 +13,12 @@ if TYPE_CHECKING:
     from ..train import History
 
 
+#: The noise on the evaluated states (``noise_over_spread``, the median over the variables of
+#: :func:`metriplex.data.state_noise` over their standard deviation) from which train's final
+#: line says that its rollout error includes it.
+NOTED_NOISE = 0.005
+
+
 def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
                   first_stage: bool = False, held_stage: bool = False,
                   trainings: str = "") -> str:
@@ -65,6 +71,11 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
         std = metrics.get("rollout_error_standardised_mean")
         rollouts += ")" if std is None else (f"; {std:.3e} in standard deviations about the "
                                             "data's mean, which no offset shrinks)")
+    noise = metrics.get("noise_over_spread")
+    if noise is not None and noise >= NOTED_NOISE:  # audit 10: read as the model's error alone
+        rollouts += (f"; against the recorded states, whose noise (about {noise:.1%} of a "
+                     "variable's standard deviation) it includes: `metriplex evaluate` on "
+                     "clean data, where there are, tells the model's own error")
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
