@@ -302,7 +302,19 @@ def test_what_the_reference_leaves_of_smooth_dynamics_is_no_floor():
     assert [c["name"] for c in v["reasons"] if c["passed"] is False] == [
         "reference_residual_correlation"]  # it alone decides
     assert v["outcome"] == CANNOT_TELL, v["statement"]
-    assert "it is dynamics that neither model has, not noise" in v["statement"]
+    assert "it is dynamics that the reference misses, not noise" in v["statement"]
+
+
+def test_a_reference_that_fits_worse_than_the_structured_model_is_named_first():
+    # The cause a user reads first was a missing input where the reference was simply the
+    # weaker fit (structured 0.037, reference 0.047: audit 10).
+    from metriplex._verdict_checks import _residual_checks
+    from metriplex.verdict import Thresholds
+
+    (_, weaker, _), _ = _residual_checks(0.037, 0.047, "", Thresholds(), correlation=0.99)
+    assert weaker["passed"] is False and "the reference is the weaker fit" in weaker["note"]
+    (_, both, _), _ = _residual_checks(0.06, 0.047, "", Thresholds(), correlation=0.99)
+    assert "weaker fit" not in both["note"] and "may miss it too" in both["note"]
 
 
 def test_roughness_is_one_for_noise_and_omega_dt_over_root_three_for_smooth_motion():

@@ -215,11 +215,18 @@ def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str
         noise_note = (f"the {_fmt(rel_box)} of the rates that the reference leaves unexplained "
                       f"correlates from one pair to the next by {_fmt(correlation)} (noise on "
                       "the states gives about -0.5)" + (
-                          "" if noise_pass else ": it is dynamics that neither model has, not "
-                          "noise: an input or a parameter that changes in time, a variable "
-                          "missing from the data, or too few trajectories for the reference to "
-                          "generalise; a structured model that leaves as much may miss it "
-                          "too"))
+                          "" if noise_pass else ": it is dynamics that the reference misses, "
+                          "not noise" + (
+                              f"; the structured model leaves less ({_fmt(rel_gen)}), so the "
+                              "reference is the weaker fit (too few trajectories for it to "
+                              "generalise, or too short a training: raise --verdict-steps), or "
+                              "both miss an input, a parameter that changes in time or a "
+                              "variable missing from the data"
+                              if rel_gen is not None and rel_gen < rel_box else
+                              ": an input or a parameter that changes in time, a variable "
+                              "missing from the data, or too few trajectories for the "
+                              "reference to generalise; a structured model that leaves as "
+                              "much may miss it too")))
     noise = _reason("reference_residual_correlation", correlation, th.residual_correlation,
                     noise_pass, CANNOT_TELL, noise_note)
     return [reference, noise, compared], ratio
