@@ -211,7 +211,7 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
     stays constant there and S does not decrease); the titles say how far each moves against
     ``spreads``, each potential's spread over the data (of which an axis spans at least
     :data:`LEAST_SPAN`). ``failed_at``: where the rollout failed; the potentials stop there."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.9), constrained_layout=True)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.9), constrained_layout=True)
     E, S = (np.where(np.isfinite(a), a, np.nan) for a in (E, S))
     _line(a1, ts, E, color="C3", label="learned E along the learned rollout")
     _line(a2, ts, S, color="C0", label="learned S along the learned rollout")
@@ -238,7 +238,7 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
                         for w, c in (("rollout", v), ("data", on_data))
                         if spread and c is not None and np.isfinite(c).any())
         ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
-                     fontsize=10)
+                     fontsize=9)
         ax.legend(fontsize=8)
     return fig
 
