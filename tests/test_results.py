@@ -82,6 +82,11 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                           Path("run"), first_stage=True, held_stage=True)
     assert held.startswith("trained 3000 steps after the first stage's (L grad E alone) and "
                            "the held one's (the friction to that energy; above), all in 5.0 s")
+    # Where --repeats trained several times, the seconds are of them all (audit 10).
+    again = train_summary(_history(2000, 3000, True, "converged at step 3000"), metrics, 5.0,
+                          Path("run"), first_stage=True, trainings="kept training 2 of 3")
+    assert again.startswith("trained 3000 steps after the first stage's (L grad E alone, "
+                            "above), every training with its stages in 5.0 s")
 
 
 def test_train_summary_says_when_the_model_kept_is_barely_trained():

@@ -79,12 +79,15 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
-    steps = f"{last} steps in"
+    # The seconds are of every training (--repeats) with its stages (audit 10: "both in" read
+    # as one training's two stages).
+    span = "every training with its stages in" if trainings else None
+    steps = f"{last} steps" + ("; every training in" if trainings else " in")
     if first_stage and held_stage:
         steps = (f"{last} steps after the first stage's (L grad E alone) and the held one's "
-                 "(the friction to that energy; above), all in")
+                 f"(the friction to that energy; above), {span or 'all in'}")
     elif first_stage:
-        steps = f"{last} steps after the first stage's (L grad E alone, above), both in"
+        steps = f"{last} steps after the first stage's (L grad E alone, above), {span or 'both in'}"
     return f"trained {steps} {seconds:.1f} s ({ended}); {rollouts}; run folder: {out}"
 
 
