@@ -91,8 +91,13 @@ def files(tmp_path_factory):
 
 
 def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch):
-    # As in a terminal: every frame is drawn (the captured stderr is not one).
+    # As in a terminal (the captured stderr is not one), with every frame drawn: at tqdm's
+    # own 0.1 s between frames a bar's last one was skipped where the phases ran fast (a warm
+    # compilation cache), and the test failed on timing.
     monkeypatch.setattr(_progress, "_terminal", lambda stream=None: True)
+    tqdm = _progress.tqdm
+    monkeypatch.setattr(_progress, "tqdm",
+                        lambda **k: tqdm(**{"mininterval": 0, "miniters": 1, **k}))
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCH_STATES", 0)
     monkeypatch.setattr(diagnostics, "ROLLOUT_BATCHES", 3)  # 6 trajectories: 2 a batch
     calls = []
