@@ -104,8 +104,9 @@ def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_pat
     from metriplex.config import RunConfig
 
     data = add_noise(oscillator_data(k=6, n_t=161), 0.05, seed=0)
+    # (one start, one training, no first stage: each has tests of its own)
     config = RunConfig(entropy="sum:2", poisson="canonical:1", width=8, steps=10, eval_every=10,
-                       float64=True, starts=1, repeats=1)
+                       float64=True, starts=1, repeats=1, reversible_first=False)
     train_run(data, config, tmp_path / "run", validation_ids=[4, 5], progress=False)
     header = json.loads((tmp_path / "run" / "config.json").read_text())
     k = header["decided"]["every"]

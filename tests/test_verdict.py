@@ -655,7 +655,7 @@ def test_a_consistent_fit_by_l_grad_e_alone_says_it_identifies_no_dissipation():
     # conservative, so the fit is exact; with S learned and M = 0 the statement says what the
     # fit cannot tell, and with S given it does not.
     data = _oscillator_data(lambda x: np.stack([x[..., 1], -x[..., 0], 0.0 * x[..., 2]], -1),
-                            12, 0)
+                            24, 0)  # the shapes of `pumped`: its compiled programs serve
     reference = train_reference(data, steps=STEPS, width=16)
     energy = mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2) + x[2])
     learned_s = mx.MLPPotential(3, width=8, data=data.x, key=jr.key(0))
@@ -663,7 +663,9 @@ def test_a_consistent_fit_by_l_grad_e_alone_says_it_identifies_no_dissipation():
 
     for entropy, said in ((learned_s, True), (mx.SumOf((2,)), False)):
         model = mx.GenericModel(energy, entropy, mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
-        v = verdict(model, data, reference=reference, converged=True, stopped="converged")
+        report = mx.evaluate(model, data, scheme=mx.RK4(), step_check=False)
+        v = verdict(model, data, report=report, reference=reference, converged=True,
+                    stopped="converged")
         assert v["outcome"] == CONSISTENT, v["statement"]
         assert (REVERSIBLE_ONLY in v["statement"]) is said
 
