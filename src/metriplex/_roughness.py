@@ -101,13 +101,21 @@ def state_noise(data: _Samples) -> np.ndarray:
     times :math:`\Delta t^3`, so on clean data this is an upper bound far below the motion).
     Zeros where no trajectory has four samples."""
     x = np.asarray(data.x, dtype=np.float64)
-    tr = data.trajectory
     if len(x) < 4:
         return np.zeros(x.shape[1])
-    same = (tr[3:] == tr[:-3])  # the four samples of one trajectory (rows are grouped by id)
-    third = (x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3])[same]
+    tr = data.trajectory
+    return _third_difference_noise(x, tr[3:] == tr[:-3])  # (rows are grouped by trajectory)
+
+
+def _third_difference_noise(x: np.ndarray, same: np.ndarray | None = None) -> np.ndarray:
+    """The white-noise standard deviation that the third differences of ``x`` (rows in order,
+    at least 4) give, along its first axis: only those whose four rows are ``same`` (one
+    trajectory) where given; zeros where none is."""
+    third = x[3:] - 3 * x[2:-1] + 3 * x[1:-2] - x[:-3]
+    if same is not None:
+        third = third[same]
     if not len(third):
-        return np.zeros(x.shape[1])
+        return np.zeros(x.shape[1:])
     return np.sqrt(np.mean(third**2, axis=0) / 20.0)
 
 
@@ -135,8 +143,7 @@ def range_beyond_noise(series: np.ndarray, parts: int = 10) -> float:
     v = np.asarray(series, dtype=np.float64)
     if len(v) < 4:
         return float(np.ptp(v)) if len(v) else 0.0
-    third = v[3:] - 3 * v[2:-1] + 3 * v[1:-2] - v[:-3]
-    sigma = float(np.sqrt(np.mean(third**2) / 20.0))
+    sigma = float(_third_difference_noise(v))
     stretches = np.array_split(v, min(parts, len(v)))
     means = np.array([s.mean() for s in stretches])
     least = min(len(s) for s in stretches)

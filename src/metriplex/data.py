@@ -115,6 +115,11 @@ def check_width(have: int, n: int) -> None:
             f"for {have} variables or select matching columns.")
 
 
+def _samples_apart(k: Any) -> int:
+    """``k`` of :meth:`Trajectories.every` and :meth:`Trajectories.interleaved`, checked."""
+    return expect_integer(k, what="the number of samples k", least=1, fix="1 keeps every sample.")
+
+
 def uniform_times(trajectory: ArrayLike, dt: float) -> np.ndarray:
     r"""The uniform time grid :math:`t = k\,\Delta t` of each row: ``k`` counts the rows of the
     same trajectory id before it, in file order (what ``--dt`` gives instead of a file's own
@@ -275,28 +280,28 @@ class Trajectories:
         """Every ``k``-th sample of each trajectory, from its first: pairs ``k`` samples apart,
         whose rates rise ``k`` times further above noise on the recorded states (and whose
         step resolves the dynamics ``k`` times less finely)."""
-        k = expect_integer(k, what="the number of samples k", least=1,
-                           fix="1 keeps every sample.")
-        starts, counts = self._bounds()
-        position = np.arange(len(self.t)) - np.repeat(starts, counts)
-        keep = position % int(k) == 0
+        keep = self._positions() % _samples_apart(k) == 0
         return Trajectories(self.trajectory[keep], self.t[keep], self.x[keep], self.names)
 
     def interleaved(self, k: int) -> "Trajectories":
         """Each trajectory as ``k`` interleaved ones, the ``j``-th holding its samples ``j, j +
         k, j + 2k, ...`` with id ``k * id + j``: pairs ``k`` samples apart, every sample still
         used, but for a trajectory's lone samples (fewer than ``k`` samples at its end)
-        (:func:`pair_spacing` chooses ``k`` for noisy data)."""
-        kept = self.every(k)  # checks k
+        (:func:`pair_spacing` chooses ``k`` for noisy data). ``k = 1``: these data, not a
+        copy (training holds its states once)."""
+        k = _samples_apart(k)
         if k == 1:
-            return kept
-        starts, counts = self._bounds()
-        offset = (np.arange(len(self.t)) - np.repeat(starts, counts)) % k
-        ids = self.trajectory.astype(np.int64) * k + offset
+            return self
+        ids = self.trajectory.astype(np.int64) * k + self._positions() % k
         _, back, count = np.unique(ids, return_inverse=True, return_counts=True)
         order = np.argsort(ids, kind="stable")
         order = order[count[back][order] > 1]  # a lone sample pairs with nothing
         return Trajectories(ids[order], self.t[order], self.x[order], self.names)
+
+    def _positions(self) -> np.ndarray:
+        """Each row's place in its trajectory (0 for its first sample)."""
+        starts, counts = self._bounds()
+        return np.arange(len(self.t)) - np.repeat(starts, counts)
 
     def pairs(self, dtype: DTypeLike | None = None) -> Pairs:
         """Consecutive rows of the same trajectory, each with its own ``dt``; states in
