@@ -548,10 +548,17 @@ def test_evaluate_reports_how_far_the_learned_energy_moves_along_the_data():
     truth = system.model
     kept = mx.evaluate(truth, data, scheme=mx.RK4(), step_check=False)
     assert kept["energy_change_along_data_over_spread"] < 1e-6
-    tilted = mx.GenericModel(mx.Known(lambda x: truth.energy(x) + 0.3 * x[1]), truth.entropy,
+    tilted = mx.GenericModel(mx.Known(lambda x: truth.energy(x) + x[1]), truth.entropy,
                              truth.poisson, truth.friction)
     moved = mx.evaluate(tilted, data, scheme=mx.RK4(), step_check=False)
     assert moved["energy_change_along_data_over_spread"] > 0.05
+    # train and evaluate warn where it is more than a tenth (the zoo's clean fits: at most 4 %).
+    from metriplex.app._warnings import ENERGY_CHANGE, structure_warnings
+
+    said = [w for w in structure_warnings(moved) if "energy_change_along_data" in w]
+    assert (len(said) == 1) == (moved["energy_change_along_data_over_spread"] > ENERGY_CHANGE)
+    assert not any("energy_change_along_data" in w for w in structure_warnings(kept))
+    assert said and f"{moved['energy_change_along_data_over_spread']:.2g}" in said[0]
     # Only beyond noise on the data: with 5 % noise the true E spans 7 % of its spread over
     # the data along a trajectory of 100 states, noise alone.
     from metriplex.data import range_beyond_noise
