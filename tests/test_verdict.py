@@ -709,3 +709,19 @@ def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():
     assert v["outcome"] == NOT_CONSISTENT, v["statement"]
     assert any(w.startswith("second law") for w in v["violations"])
     assert v["statement"].endswith(GIVEN_ENTROPY_FALLS + " " + MISSING_VARIABLE)
+
+
+def test_a_check_failed_by_another_rule_within_its_limit_does_not_read_as_passing():
+    # "residual_ratio = 2 < 2" was printed for 1.9948 failed by the rule of 5x the reference.
+    from metriplex.verdict import _said
+
+    failed = {"name": "residual_ratio", "value": 1.9948, "threshold": 2.0, "passed": False,
+              "effect": NOT_CONSISTENT, "note": "and 15x the reference's own"}
+    said = _said(failed)
+    assert "2 < 2" not in said and "1.99, within its limit 2 but failed" in said, said
+    assert "15x" in said
+    assert _said({**failed, "value": 3.1}).startswith("residual_ratio = 3.1 > 2 (")
+    assert _said({**failed, "value": 1.5, "passed": True}).startswith("residual_ratio = 1.5 <= 2")
+    few = {"name": "held_out_pairs", "value": 4, "threshold": 10, "passed": False,
+           "effect": CANNOT_TELL, "note": "too few"}
+    assert _said(few).startswith("held_out_pairs = 4 < 10 (")

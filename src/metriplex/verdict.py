@@ -239,21 +239,18 @@ def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool 
     return outcome
 
 
-def _learned(block: Any) -> bool:
-    """Whether ``block`` has trainable weights (a network, not a given function)."""
-    return bool(weights(block))
-
-
 @in_full_precision
 def _said(r: dict[str, Any]) -> str:
     """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
-    on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum)."""
-    above = isinstance(r["value"], (int, float)) and isinstance(r["threshold"], (int, float)) \
-        and r["value"] > r["threshold"]
-    cmp = (">" if above else "<") if r["passed"] is False else (">=" if above else "<=")
-    lim = "" if r["threshold"] is None or isinstance(r["threshold"], bool) else \
-        f" {cmp} {_fmt(r['threshold'])}"
-    return f"{r['name']} = {_fmt(r['value'])}{lim} ({r['note']})"
+    on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum);
+    a maximum failed by another rule that its note gives: ``within its limit but failed``."""
+    v, lim, failed = r["value"], r["threshold"], r["passed"] is False
+    above = isinstance(v, (int, float)) and isinstance(lim, (int, float)) and v > lim
+    if failed and not above and r["effect"] == NOT_CONSISTENT and isinstance(v, float):
+        return f"{r['name']} = {v:.3g}, within its limit {_fmt(lim)} but failed ({r['note']})"
+    cmp = (">" if above else "<") if failed else (">=" if above else "<=")
+    said = "" if lim is None or isinstance(lim, bool) else f" {cmp} {_fmt(lim)}"
+    return f"{r['name']} = {_fmt(v)}{said} ({r['note']})"
 
 
 def verdict(
@@ -340,7 +337,7 @@ def verdict(
     reasons += compared + _training_checks(data, trained_on, rel_gen, th=th, misfit=any(
         r["name"] == "residual_ratio" and r["passed"] is False for r in compared))
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
-    entropy_free = _learned(model.entropy) or isinstance(model.entropy, ZeroPotential)
+    entropy_free = bool(weights(model.entropy)) or isinstance(model.entropy, ZeroPotential)
     reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)
 
     # -- the outcome --
@@ -375,9 +372,9 @@ def verdict(
         statement = ("cannot tell whether the data are consistent with GENERIC: "
                      + "; ".join(_said(r) for r in failed) + ".")
         names = {r["name"] for r in failed}
-        if "jacobi" in names and _learned(model.poisson):
+        if "jacobi" in names and bool(weights(model.poisson)):
             statement += " " + NOT_POISSON
-        if _learned(model.entropy) and names & _SPLIT_CHECKS:
+        if bool(weights(model.entropy)) and names & _SPLIT_CHECKS:
             statement += " " + UNIDENTIFIED_SPLIT
     return {
         "outcome": outcome,
