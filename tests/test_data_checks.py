@@ -96,16 +96,26 @@ def test_times_that_do_not_increase_get_the_cause_that_applies():
     # "Sort the samples by time" would interleave two recordings numbered alike, and cannot
     # help float32 times that are too coarse for an epoch clock.
     x = np.zeros((4, 1))
-    with pytest.raises(mx.MetriplexError, match=r"2 separate blocks \(rows 0-1, 4-5\): two "
-                                                r"recordings under one id"):
+    with pytest.raises(mx.MetriplexError, match=r"2 separate blocks \(rows 0-1, 4-5\) and "
+                                                r"repeat times: two recordings under one id"):
         mx.Trajectories(np.array([0, 0, 1, 1, 0, 0]), np.array([0.0, 1, 0, 1, 0, 1]),
                         np.zeros((6, 1)))
     epoch = np.float32(1.7e9) + np.arange(4, dtype=np.float32)  # rounds to equal values
     with pytest.raises(mx.MetriplexError, match=r"float32, which at t = 1\.7e\+09 resolve only "
                                                 r"128"):
         mx.Trajectories(np.zeros(4, int), epoch, x)
-    with pytest.raises(mx.MetriplexError, match="Sort the samples by time"):
+    with pytest.raises(mx.MetriplexError, match=r"not in time order.*sort the rows by "
+                                                r"trajectory and time"):
         mx.Trajectories(np.zeros(4, int), np.array([0.0, 2.0, 1.0, 3.0]), x)
+    # Rows shuffled (as after a merge): one trajectory in many blocks, every time distinct, was
+    # "two recordings under one id?" (a new-user check).
+    order = np.random.default_rng(0).permutation(8)
+    with pytest.raises(mx.MetriplexError, match=r"Its 4 rows \(in \d+ separate blocks, rows .*\) "
+                                                r"are not in time order, and no time repeats"):
+        mx.Trajectories(np.array([0, 0, 0, 0, 1, 1, 1, 1])[order],
+                        np.array([0.0, 1, 2, 3, 0, 1, 2, 3])[order], np.zeros((8, 1)))
+    with pytest.raises(mx.MetriplexError, match="Some times repeat: drop the duplicated"):
+        mx.Trajectories(np.zeros(4, int), np.array([0.0, 1.0, 1.0, 3.0]), x)
 
 
 def test_a_mat_file_holding_L_and_M_says_so(tmp_path):

@@ -341,7 +341,7 @@ def test_npz_damaged_member(tmp_path):
         ("trajectory,t,q\n0,0,1\n\n0,1,nan\n", r"line 4, column 'q' holds 'nan'"),
         ("trajectory,t,q\n0,0,1\n0,1,-inf\n", r"line 3, column 'q' holds '-inf'"),
         ("trajectory,t,q\n0.5,0,1\n0.5,1,1\n", r"line 2: trajectory id '0\.5' is not an integer"),
-        ("trajectory,t,q\n0,1,1\n0,0,1\n", r"strictly increasing.*Sort the samples by time"),
+        ("trajectory,t,q\n0,1,1\n0,0,1\n", r"strictly increasing.*sort the rows by trajectory and time"),
         ("trajectory,t,q\n0,0,1\n0,1,1\n1,0,1\n", r"at least two samples.*trajectory 1 has 1"),
         ('trajectory,t,q\n0,0,"1\n', r"not valid CSV \(unexpected end of data\)"),
         # What a new user's own files gave, each with the fix that applies (not "rename").

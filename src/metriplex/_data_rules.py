@@ -88,18 +88,25 @@ def checked_columns(trajectory: Any, t: Any, x: Any, names: Any
 
 def _why_not_increasing(rows: np.ndarray, t_given: np.ndarray, at: float) -> str:
     """The likely cause and fix where a trajectory's times do not increase: two recordings
-    under one id (its rows in separate blocks), float32 times too coarse for their size, or
-    unsorted samples (float32 times: stored so, or every one of them a float32 value beyond
-    2**24, as the readers' float64 copy of a float32 column is)."""
+    under one id (its rows in separate blocks, some times repeated), float32 times too coarse
+    for their size, rows out of order (every time distinct: sort them), or repeated samples
+    (float32 times: stored so, or every one of them a float32 value beyond 2**24, as the
+    readers' float64 copy of a float32 column is)."""
     blocks = np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1)
-    if len(blocks) > 1:
-        spans = ", ".join(f"{b[0]}-{b[-1]}" for b in blocks[:3])
-        return (f"Its rows stand in {len(blocks)} separate blocks (rows {spans}): two "
-                "recordings under one id? Give each its own trajectory id.")
     times = np.asarray(t_given[rows], np.float64)
+    distinct = len(np.unique(times)) == len(times)
+    spans = ", ".join(f"{b[0]}-{b[-1]}" for b in blocks[:3])
+    if len(blocks) > 1 and not distinct:
+        return (f"Its rows stand in {len(blocks)} separate blocks (rows {spans}) and repeat "
+                "times: two recordings under one id? Give each its own trajectory id.")
     if t_given.dtype == np.float32 or (abs(at) >= 2.0**24
                                       and np.all(times == times.astype(np.float32))):
         return (f"The times are float32, which at t = {at:.4g} resolve only "
                 f"{float(np.spacing(np.float32(at))):.3g}: store them as float64, or measured "
                 "from the first sample.")
-    return "Sort the samples by time, drop duplicates, or split the trajectory."
+    if distinct:
+        where = f" (in {len(blocks)} separate blocks, rows {spans})" if len(blocks) > 1 else ""
+        return (f"Its {len(rows)} rows{where} are not in time order, and no time repeats: sort "
+                "the rows by trajectory and time (pandas: df.sort_values(['trajectory', "
+                "'t'])).")
+    return "Some times repeat: drop the duplicated samples, or split the trajectory."
