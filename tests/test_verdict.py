@@ -578,10 +578,10 @@ def test_a_learned_entropy_is_told_apart_from_a_given_one():
     # With S learned, a "cannot tell" on the structure checks adds that trajectories alone do
     # not fix the split of the motion (GENERIC data with nothing given failed the same checks
     # as data that are not GENERIC, with no word on why).
-    from metriplex.verdict import _learned
+    from metriplex._model import weights  # what the verdict asks of the entropy block
 
-    assert _learned(mx.MLPPotential(3, width=4, depth=1, key=jr.key(0)))
-    assert not _learned(mx.SumOf((2,))) and not _learned(mx.Known(lambda x: x[0]))
+    assert weights(mx.MLPPotential(3, width=4, depth=1, key=jr.key(0)))
+    assert not weights(mx.SumOf((2,))) and not weights(mx.Known(lambda x: x[0]))
 
 
 def test_a_residual_far_beyond_the_reference_is_not_hidden_by_the_tolerance():

@@ -246,7 +246,7 @@ def _said(r: dict[str, Any]) -> str:
     a maximum failed by another rule that its note gives: ``within its limit but failed``."""
     v, lim, failed = r["value"], r["threshold"], r["passed"] is False
     above = isinstance(v, (int, float)) and isinstance(lim, (int, float)) and v > lim
-    if failed and not above and r["effect"] == NOT_CONSISTENT and isinstance(v, float):
+    if failed and not above and r.get("effect") == NOT_CONSISTENT and isinstance(v, float):
         return f"{r['name']} = {v:.3g}, within its limit {_fmt(lim)} but failed ({r['note']})"
     cmp = (">" if above else "<") if failed else (">=" if above else "<=")
     said = "" if lim is None or isinstance(lim, bool) else f" {cmp} {_fmt(lim)}"
