@@ -156,3 +156,34 @@ def test_trains_final_line_says_its_error_includes_the_noise_of_the_validation_s
     quiet = train_summary(History(), {**metrics, "noise_over_spread": noise_level(clean)}, 1.0,
                           tmp_path)
     assert "noise" not in quiet
+
+
+def test_coarse_or_uneven_clean_steps_are_not_read_as_noise():
+    # Clean data at an adaptive solver's own steps (about 18 per period) and a random
+    # sub-sample of a fine grid read 1.0 % and 2.9 % "noise" from third differences on an even
+    # grid (a new-user check); the divided differences at the samples' own times do not.
+    from metriplex.data import noise_level, range_beyond_noise, state_noise
+
+    rng = np.random.default_rng(0)
+    grids = {"coarse": np.arange(0.0, 20.0, 0.33),
+             "uneven": np.sort(rng.uniform(0.0, 20.0, 80)),
+             "adaptive": np.cumsum(np.r_[0.0, rng.uniform(0.005, 0.5, 60)])}
+    for name, t in grids.items():
+        x = np.stack([np.sin(t), np.cos(t), 0.01 * t], axis=1)
+        clean = mx.Trajectories(np.zeros(len(t), int), t, x)
+        assert noise_level(clean) < 1e-3, name
+        noisy = add_noise(clean, 0.05, seed=2)
+        assert noise_level(noisy) == pytest.approx(0.05, rel=0.25), name
+    # No unit of time changes it; on an even grid it reads noise as the third differences did.
+    t = np.linspace(0.0, 10.0, 200)
+    data = add_noise(mx.Trajectories(np.zeros(200, int), t, np.stack([np.sin(t)], 1)), 0.01, 3)
+    ms = mx.Trajectories(data.trajectory, 1e3 * data.t, data.x)
+    np.testing.assert_allclose(state_noise(ms), state_noise(data), rtol=1e-9)
+    third = np.diff(data.x[:, 0], 3)
+    assert state_noise(data)[0] == pytest.approx(np.sqrt(np.mean(third**2) / 20), rel=0.2)
+    # Trajectories of 4 to 6 samples fall back to lower orders; fewer than 4: zeros.
+    short = mx.Trajectories(np.repeat([0, 1], 5), np.tile(np.arange(5.0), 2),
+                            0.1 * rng.normal(size=(10, 1)))
+    assert 0.0 < state_noise(short)[0] < 1.0
+    assert state_noise(mx.Trajectories(np.zeros(3, int), np.arange(3.0), np.ones((3, 1))))[0] == 0
+    assert range_beyond_noise(0.01 * rng.normal(size=200)) == 0.0
