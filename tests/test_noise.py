@@ -187,3 +187,23 @@ def test_coarse_or_uneven_clean_steps_are_not_read_as_noise():
     assert 0.0 < state_noise(short)[0] < 1.0
     assert state_noise(mx.Trajectories(np.zeros(3, int), np.arange(3.0), np.ones((3, 1))))[0] == 0
     assert range_beyond_noise(0.01 * rng.normal(size=200)) == 0.0
+
+
+def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
+    # An adaptive solver's own steps (about 18 a period) trained a model that erred 16x more at
+    # a finer step than at the data's, with nothing said (a new-user check).
+    from metriplex.app._data_checks import spacing_note
+
+    rng = np.random.default_rng(0)
+
+    def circles(t):
+        return mx.Trajectories(np.repeat(np.arange(4), len(t)), np.tile(t, 4), np.concatenate(
+            [np.stack([np.sin(t + a), np.cos(t + a)], 1) for a in rng.uniform(0, 6, 4)]))
+
+    coarse = circles(np.arange(0.0, 30.0, 0.35))
+    (note,) = spacing_note(coarse, 1, None)
+    assert "steps are coarse" in note and "roughness 0.2" in note
+    assert spacing_note(circles(np.arange(0.0, 30.0, 0.05)), 1, None) == []
+    # Noisy data get the note on noise instead (pairs further apart), never this one.
+    noisy = add_noise(circles(np.arange(0.0, 30.0, 0.05)), 0.05, seed=4)
+    assert all("coarse" not in n for n in spacing_note(noisy, 8, None))

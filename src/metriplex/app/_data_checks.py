@@ -209,17 +209,36 @@ def operators_note(path: str | Path, poisson: str, friction: str) -> list[str]:
             + ("them" if len(unused) > 1 else "it") + " as given."]
 
 
+#: Above this roughness of clean training pairs (about omega dt = 0.26, 24 samples a period)
+#: train notes that the steps are coarse: 0.013-0.032 on the zoo's data, at most 0.11 on
+#: those of the reference experiments and of nine systems outside the zoo; 0.16 on a new-user
+#: check's adaptive solver steps, whose model erred 16x more at a finer step.
+COARSE_STEPS = 0.15
+#: Below this noise level (a fraction of each variable's spread) the pairs' roughness is the
+#: motion's, not the noise's.
+CLEAN = 0.002
+
+
 def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[str]:
     """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
     ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
-    them."""
+    them; or, on clean data, the note that the pairs' steps are coarse for the motion."""
     from ..data import noise_level, roughness, state_scale
 
+    d = state_scale(train.x)
+    near, noise = roughness(train, d, spacing=spacing), noise_level(train)
+    if near is not None and near > COARSE_STEPS and noise < CLEAN:
+        return [f"note: the training pairs' steps are coarse for the motion they record "
+                f"(roughness {near:.2g}: about {np.sqrt(3.0) * near:.2g} radians of its "
+                "fastest motion per step, where the data show no noise): Crank-Nicolson pairs "
+                "this far apart fit the map of such a step more than the dynamics (the "
+                "scheme's own error, about a twelfth of that squared of each rate, is "
+                "learned into the field), so rollouts at these steps can be far more accurate "
+                "than at finer ones (--dt, data sampled more finely). Sample more finely where "
+                "you can (README, Coarse steps)."]
     if given is not None or spacing == 1:
         return []
-    d = state_scale(train.x)
     near, apart = roughness(train, d), roughness(train, d, spacing=spacing)
-    noise = noise_level(train)
     return [f"note: the training data's rates change from one pair to the next as noise on the "
             f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart; the noise is about "
