@@ -242,6 +242,22 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     assert v_noisy["outcome"] == CANNOT_TELL and rough["passed"] is False, v_noisy["statement"]
     assert rough["value"] > 2 and "train on data as clean as these" in v_noisy["statement"]
     d = np.std(pumped.x, axis=0)
+    # A model trained on a narrow part of the states (one long trajectory of a new-user check,
+    # "NOT consistent ... first law" on GENERIC data): these data stay within 6 of its standard
+    # deviations, but many of their states lie beyond 3.
+    narrow = mx.Units(tuple(np.mean(pumped.x, axis=0)), tuple(d / 1.8))
+    v_narrow = verdict(model, pumped, report=report, reference=reference, trained_on=narrow)
+    r_narrow = _reasons(v_narrow)
+    assert r_narrow["training_range"]["passed"] is True, r_narrow["training_range"]
+    cover = r_narrow["training_coverage"]
+    assert v_narrow["outcome"] == CANNOT_TELL and cover["passed"] is False, v_narrow["statement"]
+    assert cover["value"] > 0.05 and "not trained where these data go" in v_narrow["statement"]
+    assert _reasons(v_in)["training_coverage"]["passed"] is True  # the data it was trained on
+    from metriplex._verdict_training import _coverage_check  # only where the ratio failed
+    from metriplex.verdict import Thresholds
+
+    (unjudged,) = _coverage_check(pumped, narrow, ratio_failed=False, th=Thresholds())
+    assert unjudged["passed"] is None and unjudged["value"] == cover["value"]
     elsewhere = mx.Units(tuple(np.mean(pumped.x, axis=0) + 10 * d), tuple(d))
     v_out = verdict(model, pumped, report=report, reference=reference, trained_on=elsewhere)
     assert v_out["outcome"] == CANNOT_TELL, v_out["statement"]

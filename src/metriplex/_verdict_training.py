@@ -1,14 +1,16 @@
 """The verdict's checks on the data a model was trained on (:func:`metriplex.verdict.verdict`
 with ``trained_on``, the :class:`~metriplex.Units` of the training data): do the judged data
-stay where the model was trained (``training_range``), and were the training data rougher
-than these (``training_roughness``)? Both make a misfit no evidence against the structure,
-since the black-box reference trains on the judged data themselves. ``th`` is the verdict's
+stay where the model was trained (``training_range``, ``training_coverage``), and were the
+training data rougher than these (``training_roughness``)? Each makes a misfit no evidence
+against the structure, since the black-box reference trains on the judged data themselves. ``th`` is the verdict's
 :class:`metriplex.verdict.Thresholds`.
 """
 
 from __future__ import annotations
 
 from typing import Any
+
+import numpy as np
 
 from ._reference import _finite
 from ._verdict_checks import CANNOT_TELL, _fmt, _reason
@@ -21,8 +23,40 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
     ``trained_on``); ``misfit``: the residual ratio failed."""
     if trained_on is None:
         return []
-    return _range_check(data, trained_on, th) + _roughness_check(
+    return _range_check(data, trained_on, th) + _coverage_check(
+        data, trained_on, ratio_failed=misfit, th=th) + _roughness_check(
         data, trained_on, rel_gen, ratio_failed=misfit, th=th)
+
+
+#: How far from the training data's mean, in their standard deviations, a state counts as
+#: beyond them for ``training_coverage`` (a uniform spread reaches 1.7, a Gaussian one goes
+#: beyond 3 at 0.3 % of its states).
+BEYOND = 3.0
+
+
+def _coverage_check(data, trained_on, *, ratio_failed: bool, th) -> list[dict[str, Any]]:
+    """``training_coverage``: the share of ``data``'s states beyond ``BEYOND`` standard
+    deviations of the training data's mean (``trained_on``) in some variable. A model trained
+    on few trajectories (one long one, say) misses states that others reach well within
+    ``training_range``, and its misfit there is how it extrapolates, while the reference trains
+    on these data. Judged only where the residual ratio failed (``ratio_failed``)."""
+    x = np.asarray(data.x, dtype=np.float64)
+    z = np.abs((x - np.asarray(trained_on.shift)) / np.asarray(trained_on.scale))
+    beyond = np.isfinite(z) & (z > BEYOND)
+    share = float(np.mean(np.any(beyond, axis=1))) if len(x) else 0.0
+    if not ratio_failed:
+        passed, note = None, "not judged: the residual ratio passes"
+    else:
+        passed = share <= th.training_coverage
+        most = data.names[int(np.argmax(np.sum(beyond, axis=0)))]
+        note = (f"{share:.1%} of these states lie beyond {BEYOND:g} standard deviations of "
+                "the training data's mean in some variable" + ("" if passed else
+                f" (most often {most}): the model was not trained where these data go, so "
+                "its misfit is how it extrapolates, no evidence against GENERIC (the "
+                "reference trains on these data); train on trajectories that cover these "
+                "states (more of them, from more initial states)"))
+    return [_reason("training_coverage", share, th.training_coverage, passed, CANNOT_TELL,
+                    note)]
 
 
 def _range_check(data, trained_on, th) -> list[dict[str, Any]]:

@@ -57,6 +57,8 @@ name                       limit          meaning
                                           from the mean of the model's training data (only
                                           with ``trained_on``): there the model
                                           extrapolates (cannot tell)
+``training_coverage``      0.05           failed residual ratio, ``trained_on``: over 5% of
+                                          the states beyond 3 of those (cannot tell)
 ``reference_residual``     0.3            the black box leaves more than 30% of the held-out
                                           rates (9% of their power) unexplained: too few
                                           trajectories to generalise from, noise, a coarse
@@ -140,8 +142,8 @@ A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
 Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
-``training_roughness`` or ``reference_residual`` → **cannot tell**; else a failed ``residual_ratio`` → **not
-consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
+``training_coverage``, ``training_roughness`` or ``reference_residual`` → **cannot tell**;
+else a failed ``residual_ratio`` → **not consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
 :func:`~metriplex._verdict_checks._far_beyond`); else any failed check → **cannot tell**;
 else **consistent**. The command line's ``metriplex evaluate --strict`` exits with
@@ -213,6 +215,7 @@ class Thresholds:
     far_residual: float = 0.03
     step_sensitivity: float = 0.1
     training_range: float = 6.0
+    training_coverage: float = 0.05
     training_roughness: float = 2.0
 
 
