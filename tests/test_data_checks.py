@@ -154,3 +154,19 @@ def test_a_variable_recorded_twice_is_pointed_at(bath):
     (line,) = repeated_column_warning([twice])
     assert line.startswith("warning: q2 repeats q (the same values in every sample)")
     assert repeated_column_warning([bath]) == []
+
+
+def test_one_or_two_training_trajectories_are_noted():
+    # One damped trajectory split in time: held-out 1.6e-3 on its end, 0.91 from other initial
+    # states, with nothing said (a new-user check).
+    from metriplex.app._data_checks import data_notes
+
+    t = np.linspace(0.0, 10.0, 50)
+    one = mx.Trajectories(np.zeros(50, int), t, np.stack([np.exp(-t), np.sin(t)], 1))
+    head = mx.Trajectories(np.zeros(40, int), t[:40], one.x[:40])
+    tail = mx.Trajectories(np.zeros(10, int), t[40:], one.x[40:])
+    (note,) = [n for n in data_notes(head, tail, "neural") if "training trajector" in n]
+    assert "only 1 training trajectory" in note and "the end of the same trajectory" in note
+    many = mx.Trajectories(np.repeat(np.arange(3), 50), np.tile(t, 3),
+                           np.random.default_rng(0).normal(size=(150, 2)))
+    assert not any("training trajector" in n for n in data_notes(many, None, "neural"))

@@ -34,8 +34,8 @@ def data_notes(train: Trajectories, valid: Trajectories | None, entropy: str,
     (``entropy``: the ``--entropy`` option), then the note on an S learned of the variables
     ``free`` that a given L leaves free (:func:`._warnings.casimir_note`)."""
     parts = [train] if valid is None else [train, valid]
-    return ([data_summary(train, valid)] + swapped_axes_warning(parts) + gap_warning(parts)
-            + repeated_column_warning(parts)
+    return ([data_summary(train, valid)] + few_trajectories_note(train, valid)
+            + swapped_axes_warning(parts) + gap_warning(parts) + repeated_column_warning(parts)
             + outlier_warning(train) + still_validation_warning(train, valid)
             + still_data_warning(parts) + entropy_warnings(parts, entropy)
             + casimir_note(free, train))
@@ -79,6 +79,28 @@ def data_summary(train: Trajectories, valid: Trajectories | None) -> str:
     steps = np.concatenate([np.diff(t) for _, t, _ in _each(parts)])
     return (f"data: {split}; {train.n} variables ({_names(train.names)}); time steps "
             f"{_span(steps)}")
+
+
+#: With at most this many training trajectories, train notes that the model learns only the
+#: states they visit.
+FEW_TRAJECTORIES = 2
+
+
+def few_trajectories_note(train: Trajectories, valid: Trajectories | None) -> list[str]:
+    """A note where training has one or two trajectories: a model learns the states they
+    visit, and a held-out error on another one (or on their ends) says little of the states
+    from other initial ones (a new-user check: one damped trajectory, held-out 1.6e-3 on its
+    end, 0.91 on others)."""
+    k = len(train.ids)
+    if k > FEW_TRAJECTORIES:
+        return []
+    held = ("its validation part, the end of the same trajector" + ("y" if k == 1 else "ies")
+            if split_in_time(train, valid) else "the validation trajectories")
+    return [f"note: only {k} training trajector{'y' if k == 1 else 'ies'}: the model learns "
+            f"the states {'it visits' if k == 1 else 'they visit'}, and from other initial "
+            f"states it extrapolates; the error on {held} says little of those. Record more "
+            "trajectories from other initial states where you can (evaluate warns where data "
+            "reach beyond the training data)."]
 
 
 def swapped_axes_warning(parts: list[Trajectories]) -> list[str]:
