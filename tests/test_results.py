@@ -573,3 +573,18 @@ def test_evaluate_reports_how_far_the_learned_energy_moves_along_the_data():
     assert np.ptp(E) > 0.05 * np.ptp([float(truth.energy(x)) for x in noisy.x])  # noise is there
     assert range_beyond_noise(E) < 0.2 * np.ptp(E)
     assert 0.85 < range_beyond_noise(np.linspace(0.0, 1.0, 100)) < 0.95  # a drift: most of it
+
+
+def test_many_variables_that_train_poorly_get_the_blocks_for_cells_named():
+    # A new-user check's chain (n = 18) trained to 0.38 with the default blocks and nothing
+    # named the cells' blocks, which gave 0.067.
+    from metriplex.app._warnings import cells_hint
+    from metriplex.config import RunConfig
+
+    poor = {"rollout_error_mean_completed": 0.28}
+    (hint,) = cells_hint(poor, RunConfig(), 18)
+    assert "--energy local:CELLS --friction local:CELLS" in hint and "18 variables" in hint
+    assert cells_hint(poor, RunConfig(), 5) == []  # few variables
+    assert cells_hint({"rollout_error_mean_completed": 0.01}, RunConfig(), 18) == []
+    assert cells_hint(poor, RunConfig(energy="local:6", friction="local:6"), 18) == []
+    assert cells_hint({}, RunConfig(), 18) == []  # no rollout completed: other warnings

@@ -1,8 +1,6 @@
-"""What each ``metriplex`` command does: its implementation and the helpers it needs.
-
-The parser (the options, their help, ``main``) is in :mod:`metriplex.app.cli`, which imports this
-module; this module never imports the parser.
-"""
+"""What each ``metriplex`` command does: its implementation and the helpers it needs. The
+parser (the options, their help, ``main``) is in :mod:`metriplex.app.cli`, which imports this
+module; this module never imports the parser."""
 
 from __future__ import annotations
 
@@ -18,8 +16,9 @@ from ..data import noise_level
 from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import (against_constant, in_sample_warning, outlier_warning, structure_warnings,
-                        time_unit_warning, trained_on, trained_units, training_range_warning)
+from ._warnings import (against_constant, cells_hint, in_sample_warning, outlier_warning,
+                        structure_warnings, time_unit_warning, trained_on, trained_units,
+                        training_range_warning)
 
 if TYPE_CHECKING:
     import argparse
@@ -161,7 +160,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
                         first_stage=reversible_first_on(config) and not args.resume,
                         held_stage=hold_energy_on(config),
                         trainings=trainings_note(run_config(out))))
-    for line in structure_warnings(metrics):
+    for line in structure_warnings(metrics) + cells_hint(metrics, config, target.n):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):
         print(
