@@ -203,6 +203,16 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     coarse = circles(np.arange(0.0, 30.0, 0.35))
     (note,) = spacing_note(coarse, 1, None)
     assert "steps are coarse" in note and "roughness 0.2" in note
+    # The final line says its held-out error is at those steps.
+    from metriplex.app._data_checks import coarse_steps
+    from metriplex.app._summary import train_summary
+    from metriplex.train import History
+
+    metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 3.5e-3,
+               "evaluated_on": "validation trajectories", "coarse_steps": coarse_steps(coarse)}
+    line = train_summary(History(), metrics, 1.0, "run")
+    assert "at the data's own steps, coarse for their motion (roughness 0.2" in line
+    assert coarse_steps(circles(np.arange(0.0, 30.0, 0.05))) is None
     assert spacing_note(circles(np.arange(0.0, 30.0, 0.05)), 1, None) == []
     # Noisy data get the note on noise instead (pairs further apart), never this one.
     noisy = add_noise(circles(np.arange(0.0, 30.0, 0.05)), 0.05, seed=4)

@@ -98,7 +98,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     """Train a model on ``args.data`` into the run folder ``--out`` (``metriplex train``), evaluate
     it on the validation trajectories and print a summary; the exit status 130 when the training was
     interrupted, else ``None``."""
-    from ._data_checks import operators_note, split_in_time
+    from ._data_checks import coarse_steps, operators_note, split_in_time
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from ._repeats import trainings_note
@@ -154,7 +154,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         metrics["evaluated_on"] = (
             "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
-        metrics["stopped"], metrics["noise_over_spread"] = history.stopped, noise_level(target)
+        metrics.update(stopped=history.stopped, noise_over_spread=noise_level(target),
+                       coarse_steps=coarse_steps(target))
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,

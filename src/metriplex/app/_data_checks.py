@@ -241,15 +241,25 @@ COARSE_STEPS = 0.15
 CLEAN = 0.002
 
 
+def coarse_steps(data: Trajectories, spacing: int = 1) -> float | None:
+    """The roughness of ``data``'s pairs ``spacing`` samples apart where their steps are
+    coarse for the motion (above ``COARSE_STEPS`` on data with no noise to speak of), else
+    ``None``."""
+    from ..data import noise_level, roughness
+
+    near = roughness(data, spacing=spacing)
+    return near if near is not None and near > COARSE_STEPS and noise_level(data) < CLEAN \
+        else None
+
+
 def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[str]:
     """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
     ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
     them; or, on clean data, the note that the pairs' steps are coarse for the motion."""
     from ..data import noise_level, roughness, state_scale
 
-    d = state_scale(train.x)
-    near, noise = roughness(train, d, spacing=spacing), noise_level(train)
-    if near is not None and near > COARSE_STEPS and noise < CLEAN:
+    near = coarse_steps(train, spacing)
+    if near is not None:
         return [f"note: the training pairs' steps are coarse for the motion they record "
                 f"(roughness {near:.2g}: about {np.sqrt(3.0) * near:.2g} radians of its "
                 "fastest motion per step, where the data show no noise): Crank-Nicolson pairs "
@@ -260,7 +270,9 @@ def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[s
                 "you can (README, Coarse steps)."]
     if given is not None or spacing == 1:
         return []
-    near, apart = roughness(train, d), roughness(train, d, spacing=spacing)
+    d = state_scale(train.x)
+    near, apart, noise = (roughness(train, d), roughness(train, d, spacing=spacing),
+                          noise_level(train))
     return [f"note: the training data's rates change from one pair to the next as noise on the "
             f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart; the noise is about "

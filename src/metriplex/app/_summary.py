@@ -76,6 +76,11 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
         rollouts += (f"; against the recorded states, whose noise (about {noise:.1%} of a "
                      "variable's standard deviation) it includes: `metriplex evaluate` on "
                      "clean data, where there are, tells the model's own error")
+    coarse = metrics.get("coarse_steps")
+    if coarse is not None:  # a new-user check: 3.5e-3 here, 16x that on a finer grid
+        rollouts += (f"; at the data's own steps, coarse for their motion (roughness "
+                     f"{coarse:.2g}): at finer steps the model can be far less accurate "
+                     "(README, Coarse steps)")
     against, _ = against_constant(metrics)
     if against:
         rollouts += f"; {against}"
