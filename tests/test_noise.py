@@ -202,7 +202,9 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
 
     coarse = circles(np.arange(0.0, 30.0, 0.35))
     (note,) = spacing_note(coarse, 1, None)
-    assert "steps are coarse" in note and "roughness 0.2" in note
+    assert "steps are coarse" in note and "roughness 0.2" in note and "--scheme rk4" in note
+    assert "Crank-Nicolson pairs" in note
+    assert spacing_note(coarse, 1, None, scheme="rk4") == []  # fourth order: no such error
     # The final line says its held-out error is at those steps.
     from metriplex.app._data_checks import coarse_steps
     from metriplex.app._summary import train_summary

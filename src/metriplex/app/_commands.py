@@ -155,7 +155,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
         metrics.update(stopped=history.stopped, noise_over_spread=noise_level(target),
-                       coarse_steps=coarse_steps(target))
+                       coarse_steps=coarse_steps(target, scheme=config.scheme))
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,

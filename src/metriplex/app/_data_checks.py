@@ -241,33 +241,43 @@ COARSE_STEPS = 0.15
 CLEAN = 0.002
 
 
-def coarse_steps(data: Trajectories, spacing: int = 1) -> float | None:
+#: The training schemes of fourth order, whose error at a coarse step is far smaller.
+FOURTH_ORDER = ("rk4",)
+_SCHEME_NAMES = {"cn": "Crank-Nicolson", "midpoint": "implicit-midpoint"}
+
+
+def coarse_steps(data: Trajectories, spacing: int = 1, scheme: str = "cn") -> float | None:
     """The roughness of ``data``'s pairs ``spacing`` samples apart where their steps are
-    coarse for the motion (above ``COARSE_STEPS`` on data with no noise to speak of), else
-    ``None``."""
+    coarse for the motion (above ``COARSE_STEPS`` on data with no noise to speak of) for a
+    second-order training ``scheme``, else ``None``."""
     from ..data import noise_level, roughness
 
+    if scheme in FOURTH_ORDER:
+        return None
     near = roughness(data, spacing=spacing)
     return near if near is not None and near > COARSE_STEPS and noise_level(data) < CLEAN \
         else None
 
 
-def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[str]:
+def spacing_note(train: Trajectories, spacing: int, given: int | None,
+                 scheme: str = "cn") -> list[str]:
     """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
     ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
-    them; or, on clean data, the note that the pairs' steps are coarse for the motion."""
+    them; or, on clean data, the note that the pairs' steps are coarse for the motion and
+    the training ``scheme`` (:func:`coarse_steps`)."""
     from ..data import noise_level, roughness, state_scale
 
-    near = coarse_steps(train, spacing)
+    near = coarse_steps(train, spacing, scheme)
     if near is not None:
         return [f"note: the training pairs' steps are coarse for the motion they record "
                 f"(roughness {near:.2g}: about {np.sqrt(3.0) * near:.2g} radians of its "
-                "fastest motion per step, where the data show no noise): Crank-Nicolson pairs "
-                "this far apart fit the map of such a step more than the dynamics (the "
-                "scheme's own error, about a twelfth of that squared of each rate, is "
-                "learned into the field), so rollouts at these steps can be far more accurate "
-                "than at finer ones (--dt, data sampled more finely). Sample more finely where "
-                "you can (README, Coarse steps)."]
+                "fastest motion per step, where the data show no noise): "
+                f"{_SCHEME_NAMES.get(scheme, scheme)} pairs this far apart fit the map of such a step more than the dynamics (the scheme's "
+                "own error, about a twelfth of that squared of each rate, is learned into the "
+                "field), so rollouts at these steps can be far more accurate than at finer "
+                "ones. --scheme rk4 (fourth order) learns the dynamics at such steps where "
+                "the system is not stiff (no relaxation much faster than a step); else sample "
+                "more finely (README, Coarse steps)."]
     if given is not None or spacing == 1:
         return []
     d = state_scale(train.x)
