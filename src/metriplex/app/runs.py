@@ -265,9 +265,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
-    for line in ([] if resume else data_notes(given_train, valid, config.entropy, free)
-                 + spacing_note(given_train, spacing, config.every, config.scheme))
-                 + said.getvalue().splitlines():
+    notes = [] if resume else (data_notes(given_train, valid, config.entropy, free)
+                               + spacing_note(given_train, spacing, config.every, config.scheme))
+    for line in notes + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
