@@ -2,8 +2,8 @@
 with ``trained_on``, the :class:`~metriplex.Units` of the training data): do the judged data
 stay where the model was trained (``training_range``, ``training_coverage``), and were the
 training data rougher than these (``training_roughness``)? Each makes a misfit no evidence
-against the structure, since the black-box reference trains on the judged data themselves. ``th`` is the verdict's
-:class:`metriplex.verdict.Thresholds`.
+against the structure, since the black-box reference trains on the judged data themselves.
+``th`` is the verdict's :class:`metriplex.verdict.Thresholds`.
 """
 
 from __future__ import annotations

@@ -139,8 +139,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         model, history, train, valid, seconds = train_parts(
             parts, config, out, overwrite=args.overwrite, resume=args.resume,
             progress=not args.quiet)
-        target = valid if valid is not None else train
-        in_time = split_in_time(train, valid)
+        target, in_time = valid if valid is not None else train, split_in_time(train, valid)
+        coarse = coarse_steps(train, scheme=config.scheme)  # what the model learned from
         # The evaluation holds only what it rolls out (large data: memory). The loss figure
         # leaves a reference cycle through matplotlib's frames that holds the training's
         # locals, the training part among them, until the collector runs: collect now.
@@ -155,7 +155,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
         metrics.update(stopped=history.stopped, noise_over_spread=noise_level(target),
-                       coarse_steps=coarse_steps(target, scheme=config.scheme))
+                       coarse_steps=coarse)
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,

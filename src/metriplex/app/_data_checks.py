@@ -272,12 +272,13 @@ def spacing_note(train: Trajectories, spacing: int, given: int | None,
         return [f"note: the training pairs' steps are coarse for the motion they record "
                 f"(roughness {near:.2g}: about {np.sqrt(3.0) * near:.2g} radians of its "
                 "fastest motion per step, where the data show no noise): "
-                f"{_SCHEME_NAMES.get(scheme, scheme)} pairs this far apart fit the map of such a step more than the dynamics (the scheme's "
-                f"own error, about {near * near / 4:.1%} of each rate, (omega dt)^2/12, is learned "
-                "into the field), so rollouts at these steps can be far more accurate than at finer "
-                "ones. --scheme rk4 (fourth order) learns the dynamics at such steps where "
-                "the system is not stiff (no relaxation much faster than a step); else sample "
-                "more finely (README, Coarse steps)."]
+                f"{_SCHEME_NAMES.get(scheme, scheme)} pairs this far apart fit the map of such "
+                f"a step more than the dynamics (the scheme's own error, about "
+                f"{near * near / 4:.1%} of each rate, (omega dt)^2/12, is learned into the "
+                "field), so rollouts at these steps can be far more accurate than at finer "
+                "ones. --scheme rk4 (fourth order) learns the dynamics at such steps where the "
+                "system is not stiff (no relaxation much faster than a step); else sample more "
+                "finely (README, Coarse steps)."]
     if given is not None or spacing == 1:
         return []
     d = state_scale(train.x)

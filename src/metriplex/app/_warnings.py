@@ -1,9 +1,10 @@
 """What train and evaluate add to their figures when the figures alone could mislead: a model
 that does not beat predicting no motion, learned temperatures that are negative, a learned
-entropy that rises far more than the data's, a learned energy that does not drive the motion or that the data do not conserve,
-a learned entropy that decreases, data whose time is in another unit than the training
-data's, data that reach where the model was never trained, data it was trained on, a
-validation part that does not move, and samples that jump away and back (outliers)."""
+entropy that rises far more than the data's, a learned energy that does not drive the
+motion or that the data do not conserve, a learned entropy that decreases, data whose time
+is in another unit than the training data's, data that reach where the model was never
+trained, data it was trained on, a validation part that does not move, samples that jump
+away and back (outliers), and many variables that a state made of cells would fit better."""
 
 from __future__ import annotations
 
@@ -172,8 +173,8 @@ def cells_hint(metrics: dict, config: Any, n: int) -> list[str]:
     return [f"hint: {n} variables and a held-out error of {error:.2g}: if the state is made of "
             "alike cells (a chain or a lattice, each cell's fields stored field by field), "
             "--energy local:CELLS --friction local:CELLS learns it as sums over neighbouring "
-            "cells (docs/structure.md, States made of cells; on a chain of 6 masses with their baths, "
-            "0.38 with the default blocks, 0.067 with these, in 3 minutes)."]
+            "cells (docs/structure.md, States made of cells; on a chain of 6 masses with "
+            "their baths, 0.38 with the default blocks, 0.067 with these, in 3 minutes)."]
 
 
 def structure_warnings(metrics: dict) -> list[str]:
