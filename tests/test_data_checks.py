@@ -167,6 +167,8 @@ def test_one_or_two_training_trajectories_are_noted():
     tail = mx.Trajectories(np.zeros(10, int), t[40:], one.x[40:])
     (note,) = [n for n in data_notes(head, tail, "neural") if "training trajector" in n]
     assert "only 1 training trajectory" in note and "the end of the same trajectory" in note
+    (alone,) = [n for n in data_notes(one, None, "neural") if "training trajector" in n]
+    assert "the error on the training data themselves says little" in alone
     many = mx.Trajectories(np.repeat(np.arange(3), 50), np.tile(t, 3),
                            np.random.default_rng(0).normal(size=(150, 2)))
     assert not any("training trajector" in n for n in data_notes(many, None, "neural"))

@@ -94,7 +94,8 @@ def few_trajectories_note(train: Trajectories, valid: Trajectories | None) -> li
     k = len(train.ids)
     if k > FEW_TRAJECTORIES:
         return []
-    held = ("its validation part, the end of the same trajector" + ("y" if k == 1 else "ies")
+    held = ("the training data themselves" if valid is None else
+            "its validation part, the end of the same trajector" + ("y" if k == 1 else "ies")
             if split_in_time(train, valid) else "the validation trajectories")
     return [f"note: only {k} training trajector{'y' if k == 1 else 'ies'}: the model learns "
             f"the states {'it visits' if k == 1 else 'they visit'}, and from other initial "
