@@ -187,6 +187,10 @@ def test_coarse_or_uneven_clean_steps_are_not_read_as_noise():
     assert 0.0 < state_noise(short)[0] < 1.0
     assert state_noise(mx.Trajectories(np.zeros(3, int), np.arange(3.0), np.ones((3, 1))))[0] == 0
     assert range_beyond_noise(0.01 * rng.normal(size=200)) == 0.0
+    # A smooth quantity along uneven times loses nothing to "noise" at its own times.
+    t = grids["uneven"]
+    means = [m.mean() for m in np.array_split(np.sin(0.3 * t), 10)]
+    assert range_beyond_noise(np.sin(0.3 * t), t) == pytest.approx(np.ptp(means), rel=1e-3)
 
 
 def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():

@@ -157,12 +157,14 @@ def noise_level(data: _Samples) -> float:
     return float(np.median(state_noise(data)[moving] / spread[moving]))
 
 
-def range_beyond_noise(series: np.ndarray, parts: int = 10) -> float:
+def range_beyond_noise(series: np.ndarray, t: np.ndarray | None = None,
+                       parts: int = 10) -> float:
     r"""How far a quantity moves along one trajectory (``series``, its values there) beyond
     white noise on it: the range of its means over ``parts`` consecutive stretches (at most one
     per value), less the range that noise alone gives such means,
     :math:`2\sqrt{2\ln m}\,\sigma/\sqrt{n}` for :math:`m` stretches of at least :math:`n`
-    values, :math:`\sigma` from the differences of :func:`state_noise`; never below 0.
+    values, :math:`\sigma` from the differences of :func:`state_noise` (at the times ``t``
+    where given, else evenly spaced); never below 0.
     On smooth values, the range of the stretches' means: about 90 % of a steady drift. The
     true energy of a damped oscillator's GENERIC data with 5 % noise on the states (8
     trajectories of 200 states) spans up to 23 % of its spread along one, noise alone; this
@@ -170,7 +172,8 @@ def range_beyond_noise(series: np.ndarray, parts: int = 10) -> float:
     v = np.asarray(series, dtype=np.float64)
     if len(v) < 4:
         return float(np.ptp(v)) if len(v) else 0.0
-    sigma = float(_difference_noise(v[:, None])[0])
+    sigma = float(_difference_noise(v[:, None], None if t is None else np.asarray(
+        t, dtype=np.float64))[0])
     stretches = np.array_split(v, min(parts, len(v)))
     means = np.array([s.mean() for s in stretches])
     least = min(len(s) for s in stretches)

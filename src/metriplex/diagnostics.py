@@ -278,7 +278,7 @@ def evaluate(
             "energy_drift_over_data_spread", no_steps),
         # The most the learned E moves along an observed trajectory beyond noise, over its spread.
         "energy_change_along_data_over_spread": known(float(max(range_beyond_noise(
-            E_data[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
+            E_data[k, :T], ts[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
             "energy_change_along_data_over_spread", "the learned E is not finite at the data"),
         "entropy_min_step": known(float(np.min(dS_min)) if dS_min else None,
                                   "entropy_min_step", no_steps),
