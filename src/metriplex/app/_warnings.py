@@ -149,9 +149,9 @@ def energy_change_warning(metrics: dict) -> list[str]:
             f"{change:.2g} of its spread over the data, beyond the noise on them "
             "(energy_change_along_data_over_spread): a closed system keeps its energy "
             "constant, so this E is not the energy the data conserve. The model is off "
-            "where the data go, or the system exchanges energy with something its state "
-            "does not record. Do not read it as the system's energy; noisy training data "
-            "are a common cause (see 'Noisy data' in the README)."]
+            "where the data go (too short a training, too few trajectories, noisy training "
+            "data: README, Noisy data), or the system exchanges energy with something its "
+            "state does not record. Do not read it as the system's energy."]
 
 
 #: With this many variables or more and a held-out error above POOR, train names the blocks for
