@@ -196,7 +196,9 @@ def test_coarse_or_uneven_clean_steps_are_not_read_as_noise():
 def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     # An adaptive solver's own steps (about 18 a period) trained a model that erred 16x more at
     # a finer step than at the data's, with nothing said (a new-user check).
-    from metriplex.app._data_checks import spacing_note
+    from metriplex.app._data_checks import coarse_note, coarse_steps, spacing_note
+    from metriplex.app._summary import train_summary
+    from metriplex.train import History
 
     rng = np.random.default_rng(0)
 
@@ -205,21 +207,18 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
             [np.stack([np.sin(t + a), np.cos(t + a)], 1) for a in rng.uniform(0, 6, 4)]))
 
     coarse = circles(np.arange(0.0, 30.0, 0.35))
-    (note,) = spacing_note(coarse, 1, None)
+    (note,) = coarse_note(coarse_steps(coarse, 1, "cn"), "cn")
     assert "steps are coarse" in note and "roughness 0.2" in note and "--scheme rk4" in note
     assert "Crank-Nicolson pairs" in note
-    assert spacing_note(coarse, 1, None, scheme="rk4") == []  # fourth order: no such error
+    assert coarse_steps(coarse, 1, "rk4") is None  # fourth order: no such error
+    assert coarse_note(None) == [] and spacing_note(coarse, 1, None) == []
     # The final line says its held-out error is at those steps.
-    from metriplex.app._data_checks import coarse_steps
-    from metriplex.app._summary import train_summary
-    from metriplex.train import History
-
     metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 3.5e-3,
                "evaluated_on": "validation trajectories", "coarse_steps": coarse_steps(coarse)}
     line = train_summary(History(), metrics, 1.0, "run")
     assert "at the data's own steps, coarse for their motion (roughness 0.2" in line
     assert coarse_steps(circles(np.arange(0.0, 30.0, 0.05))) is None
-    assert spacing_note(circles(np.arange(0.0, 30.0, 0.05)), 1, None) == []
     # Noisy data get the note on noise instead (pairs further apart), never this one.
     noisy = add_noise(circles(np.arange(0.0, 30.0, 0.05)), 0.05, seed=4)
+    assert coarse_steps(noisy, 8) is None
     assert all("coarse" not in n for n in spacing_note(noisy, 8, None))

@@ -98,7 +98,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     """Train a model on ``args.data`` into the run folder ``--out`` (``metriplex train``), evaluate
     it on the validation trajectories and print a summary; the exit status 130 when the training was
     interrupted, else ``None``."""
-    from ._data_checks import coarse_steps, operators_note, split_in_time
+    from ._data_checks import operators_note, split_in_time
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
     from ._repeats import trainings_note
@@ -140,7 +140,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             parts, config, out, overwrite=args.overwrite, resume=args.resume,
             progress=not args.quiet)
         target, in_time = valid if valid is not None else train, split_in_time(train, valid)
-        coarse = coarse_steps(train, scheme=config.scheme)  # what the model learned from
+        saved = run_config(out)  # what training wrote: its choices and trainings
         # The evaluation holds only what it rolls out (large data: memory). The loss figure
         # leaves a reference cycle through matplotlib's frames that holds the training's
         # locals, the training part among them, until the collector runs: collect now.
@@ -155,12 +155,12 @@ def cmd_train(args: argparse.Namespace) -> int | None:
             "training data" if valid is None else "validation trajectories" if not in_time
             else "the validation part (each trajectory's end, after its training part)")
         metrics.update(stopped=history.stopped, noise_over_spread=noise_level(target),
-                       coarse_steps=coarse)
+                       coarse_steps=saved.get("decided", {}).get("coarse_steps"))
         write_json(out / "metrics.json", metrics)
     print(train_summary(history, metrics, seconds, out,
                         first_stage=reversible_first_on(config) and not args.resume,
                         held_stage=hold_energy_on(config),
-                        trainings=trainings_note(run_config(out))))
+                        trainings=trainings_note(saved)))
     for line in structure_warnings(metrics) + cells_hint(metrics, config, target.n):
         print(line, file=sys.stderr)
     if history.stopped.startswith("interrupted"):

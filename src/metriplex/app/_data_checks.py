@@ -260,31 +260,35 @@ def coarse_steps(data: Trajectories, spacing: int = 1, scheme: str = "cn") -> fl
         else None
 
 
-def spacing_note(train: Trajectories, spacing: int, given: int | None,
-                 scheme: str = "cn") -> list[str]:
+def coarse_note(coarse: float | None, scheme: str = "cn") -> list[str]:
+    """The note that the training pairs' steps are coarse for the motion (``coarse``: their
+    roughness from :func:`coarse_steps`, ``None`` where they are not) and the training
+    ``scheme``."""
+    if coarse is None:
+        return []
+    return [f"note: the training pairs' steps are coarse for the motion they record "
+            f"(roughness {coarse:.2g}: about {np.sqrt(3.0) * coarse:.2g} radians of its "
+            "fastest motion per step, where the data show no noise): "
+            f"{_SCHEME_NAMES.get(scheme, scheme)} pairs this far apart fit the map of such a "
+            f"step more than the dynamics (the scheme's own error, about "
+            f"{coarse * coarse / 4:.1%} of each rate, (omega dt)^2/12, is learned into the "
+            "field), so rollouts at these steps can be far more accurate than at finer ones. "
+            "--scheme rk4 (fourth order) learns the dynamics at such steps where the system "
+            "is not stiff (no relaxation much faster than a step); else sample more finely "
+            "(README, Coarse steps)."]
+
+
+def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[str]:
     """The note on pairs ``spacing`` samples apart that the data chose (``--every`` not
     ``given``; :func:`metriplex.data.pair_spacing`): their rates are rough as noise makes
-    them; or, on clean data, the note that the pairs' steps are coarse for the motion and
-    the training ``scheme`` (:func:`coarse_steps`)."""
+    them."""
     from ..data import noise_level, roughness, state_scale
 
-    near = coarse_steps(train, spacing, scheme)
-    if near is not None:
-        return [f"note: the training pairs' steps are coarse for the motion they record "
-                f"(roughness {near:.2g}: about {np.sqrt(3.0) * near:.2g} radians of its "
-                "fastest motion per step, where the data show no noise): "
-                f"{_SCHEME_NAMES.get(scheme, scheme)} pairs this far apart fit the map of such "
-                f"a step more than the dynamics (the scheme's own error, about "
-                f"{near * near / 4:.1%} of each rate, (omega dt)^2/12, is learned into the "
-                "field), so rollouts at these steps can be far more accurate than at finer "
-                "ones. --scheme rk4 (fourth order) learns the dynamics at such steps where the "
-                "system is not stiff (no relaxation much faster than a step); else sample more "
-                "finely (README, Coarse steps)."]
     if given is not None or spacing == 1:
         return []
     d = state_scale(train.x)
-    near, apart, noise = (roughness(train, d), roughness(train, d, spacing=spacing),
-                          noise_level(train))
+    near, apart = roughness(train, d), roughness(train, d, spacing=spacing)
+    noise = noise_level(train)
     return [f"note: the training data's rates change from one pair to the next as noise on the "
             f"states makes them (roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart; the noise is about "

@@ -30,7 +30,7 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
-from ._data_checks import data_notes, spacing_note
+from ._data_checks import coarse_note, coarse_steps, data_notes, spacing_note
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
@@ -265,9 +265,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
-    notes = [] if resume else (data_notes(given_train, valid, config.entropy, free)
-                               + spacing_note(given_train, spacing, config.every, config.scheme))
-    for line in notes + said.getvalue().splitlines():
+    coarse = coarse_steps(given_train, spacing, config.scheme)  # said before and after
+    for line in ([] if resume else data_notes(given_train, valid, config.entropy, free)
+                 + coarse_note(coarse, config.scheme) + spacing_note(
+                     given_train, spacing, config.every)) + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
@@ -282,7 +283,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
-                    "repeats": repeats, "every": spacing},
+                    "repeats": repeats, "every": spacing, "coarse_steps": coarse},
         "names": list(train.names),
         "n": train.n,
         "train_trajectories": [int(i) for i in given_train.ids],
