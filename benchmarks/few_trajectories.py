@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
-from metriplex.runs import train_run  # noqa: E402
+from metriplex.app.runs import run_config, train_run, trained_scheme  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from zoo import _coerce  # noqa: E402
 
@@ -51,7 +51,8 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         model, history, _, _, seconds = train_run(train, config, Path(tmp) / "run",
                                                   overwrite=True, progress=False)
-    report = evaluate(model, test, scheme=scheme_from_name(config.scheme))
+        scheme = trained_scheme(run_config(Path(tmp) / "run"))  # given, or the data's
+    report = evaluate(model, test, scheme=scheme_from_name(scheme))
     errors = np.asarray(report["rollout_error"], dtype=float)
     done = errors[np.isfinite(errors)]
     print(json.dumps({

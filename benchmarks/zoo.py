@@ -63,7 +63,8 @@ from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.losses import SchemeResidual  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
-from metriplex.runs import train_run  # noqa: E402
+from metriplex.app._data_checks import chosen_scheme, coarse_steps  # noqa: E402
+from metriplex.app.runs import train_run, trained_scheme  # noqa: E402
 from metriplex._standardised import standardised_errors  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems.zoo import ZOO  # noqa: E402
@@ -137,7 +138,8 @@ def black_box(train, test, config: RunConfig, horizon: float | None = None) -> d
     dtype = jnp.float64 if config.float64 else jnp.float32
     box = BlackBoxModel(train.n, width=config.width, depth=config.depth, data=train.x, rate=rate,
                         key=jr.key(config.seed))
-    name = "cn" if isinstance(scheme_from_name(config.scheme), DiscreteGradient) else config.scheme
+    given = config.scheme or chosen_scheme(coarse_steps(train))  # as train's, where not given
+    name = "cn" if isinstance(scheme_from_name(given), DiscreteGradient) else given
     scheme = scheme_from_name(name)
     t0 = time.perf_counter()
     box, history = fit(box, train, loss=SchemeResidual(scheme), validation=config.validation,
@@ -166,10 +168,11 @@ def train_and_test(train, test, config: RunConfig, out: Path,
     up to ``horizon`` where given) and the ``standardised`` error."""
     model, history, _, _, seconds = train_run(train, config, out, overwrite=True,
                                               progress=False)
-    scheme = scheme_from_name(config.scheme)
+    header = json.loads((out / "config.json").read_text())
+    scheme = scheme_from_name(trained_scheme(header))  # config's, or the one the data chose
     rollout = rollout_data(model, test, scheme=scheme)
     return {"model": model, "history": history, "seconds": seconds,
-            "header": json.loads((out / "config.json").read_text()), "rollout": rollout,
+            "header": header, "rollout": rollout,
             "report": evaluate(model, test, scheme=scheme, rollout=rollout, horizon=horizon),
             "standardised": standardised_error(model, test, scheme, rollout)[0]}
 
@@ -181,7 +184,8 @@ def verdict_row(run: dict, test, config: RunConfig) -> dict:
     from metriplex.verdict import verdict
 
     v = verdict(run["model"], test, report=run["report"], history=run["history"],
-                scheme=scheme_from_name(config.scheme), width=config.width, depth=config.depth,
+                scheme=scheme_from_name(trained_scheme(run["header"])), width=config.width,
+                depth=config.depth,
                 learning_rate=config.lr, batch_size=config.batch_size,
                 trained_on=trained_units(run["header"].get("units") or {}))
     return {"outcome": v["outcome"], "ratio": v["ratio"],
@@ -221,7 +225,7 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         "n": system.n,
         "flags": flag_line(case.flags),
         "held_out": case.held_out,
-        "scheme": config.scheme,
+        "scheme": trained_scheme(header),
         "rel_l2": report["rollout_error_mean"],
         "to_horizon": report.get("rollout_error_to_horizon_mean"),
         "rel_l2_standardised": run["standardised"],

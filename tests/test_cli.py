@@ -70,7 +70,7 @@ def test_run_folder_contents(oscillator_run):
                               "starts": 1, "residual_metric": "correlated",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
-                              "patience": 20, "repeats": 3, "every": 1,
+                              "patience": 20, "repeats": 3, "every": 1, "scheme": "cn",
                               "coarse_steps": None}
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
     assert not (run_dir / ".metriplex.lock").exists()

@@ -103,7 +103,7 @@ def test_no_nan_at_zero_step_nor_zero_gradients():
     @eqx.filter_jit
     def at_zero_step(model, x):
         # What Newton sees from a zero guess: the field and its Jacobian in x1 at x1 == x0.
-        field, jac = jax.jvp(lambda y: DG.increment(model, x, y), (x,), (jnp.ones_like(x),))
+        field, jac = jax.jvp(lambda y: DG.increment(model, x, y, 0.1), (x,), (jnp.ones_like(x),))
         t = model.terms(x)
         expected = project_out(t.grad_entropy, t.poisson @ project_out(t.grad_entropy,
                                                                         t.grad_energy))

@@ -17,6 +17,7 @@ from metriplex.integrate import (
     SCHEMES,
     CrankNicolson,
     DiscreteGradient,
+    Hermite,
     ROOT_FINDERS,
     FixedPoint,
     FixedPointThenNewton,
@@ -80,8 +81,9 @@ def _padded_grids(horizon, steps):
 
 @pytest.mark.parametrize(
     "scheme, order",
-    [(CrankNicolson(), 2), (ImplicitMidpoint(), 2), (RK4(), 4), (DiscreteGradient(), 2)],
-    ids=["cn", "midpoint", "rk4", "discrete-gradient"],
+    [(CrankNicolson(), 2), (ImplicitMidpoint(), 2), (RK4(), 4), (DiscreteGradient(), 2),
+     (Hermite(), 4)],
+    ids=["cn", "midpoint", "rk4", "discrete-gradient", "hermite"],
 )
 def test_order_of_convergence(scheme, order):
     horizon, steps = 2.0, [20, 40, 80, 160]
@@ -354,7 +356,7 @@ def test_a_root_finder_is_an_object_and_a_solver_name_is_parsed_at_the_edge():
     with pytest.raises(mx.MetriplexError, match="--solver must be one of auto, newton"):
         scheme_from_name("cn", solver="bisection")
     with pytest.raises(mx.MetriplexError, match="--solver applies to the implicit schemes "
-                                                r"\(cn, midpoint, discrete-gradient\)"):
+                                                r"\(cn, midpoint, discrete-gradient, hermite\)"):
         scheme_from_name("rk4", solver="newton")
 
 

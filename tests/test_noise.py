@@ -196,7 +196,7 @@ def test_coarse_or_uneven_clean_steps_are_not_read_as_noise():
 def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     # An adaptive solver's own steps (about 18 a period) trained a model that erred 16x more at
     # a finer step than at the data's, with nothing said (a new-user check).
-    from metriplex.app._data_checks import coarse_note, coarse_steps, spacing_note
+    from metriplex.app._data_checks import chosen_scheme, coarse_note, coarse_steps, spacing_note
     from metriplex.app._summary import train_summary
     from metriplex.train import History
 
@@ -207,10 +207,16 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
             [np.stack([np.sin(t + a), np.cos(t + a)], 1) for a in rng.uniform(0, 6, 4)]))
 
     coarse = circles(np.arange(0.0, 30.0, 0.35))
-    (note,) = coarse_note(coarse_steps(coarse, 1, "cn"), "cn")
-    assert "steps are coarse" in note and "roughness 0.2" in note and "--scheme rk4" in note
+    rough = coarse_steps(coarse, 1, "cn")
+    (note,) = coarse_note(rough, "cn")  # --scheme cn given
+    assert "steps are coarse" in note and "roughness 0.2" in note and "--scheme hermite" in note
     assert "Crank-Nicolson pairs" in note
     assert coarse_steps(coarse, 1, "rk4") is None  # fourth order: no such error
+    # Where no scheme is given the coarse steps choose the fourth-order Hermite step, and say so.
+    assert chosen_scheme(rough) == "hermite" and chosen_scheme(None) == "cn"
+    (chosen,) = coarse_note(rough, "hermite", chosen=True)
+    assert "fourth-order Hermite step" in chosen and "--scheme cn" in chosen
+    assert coarse_note(rough, "hermite") == []  # given: nothing to say
     assert coarse_note(None) == [] and spacing_note(coarse, 1, None) == []
     # The final line says its held-out error is at those steps.
     metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 3.5e-3,

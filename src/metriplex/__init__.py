@@ -18,7 +18,7 @@ The data flow, one function each:
 - :func:`fit` the model (a :class:`Loss` of :class:`SchemeResidual` and penalties; it keeps the
   model whose held-out rollouts are best and returns it with its :class:`History`);
 - :func:`simulate` or :func:`solve` it from initial states (schemes :class:`CrankNicolson`,
-  :class:`ImplicitMidpoint`, :class:`DiscreteGradient`, :class:`RK4`);
+  :class:`ImplicitMidpoint`, :class:`DiscreteGradient`, :class:`RK4`, :class:`Hermite`);
 - :func:`evaluate` it on data (rollout errors, energy drift, entropy production, structure
   residuals), and :func:`save` / :func:`load` it (JSON header + Equinox leaves).
 
@@ -50,6 +50,7 @@ from .integrate import CrankNicolson as CrankNicolson
 from .integrate import DiscreteGradient as DiscreteGradient
 from .integrate import FixedPoint as FixedPoint
 from .integrate import FixedPointThenNewton as FixedPointThenNewton
+from .integrate import Hermite as Hermite
 from .integrate import ImplicitMidpoint as ImplicitMidpoint
 from .integrate import Newton as Newton
 from .integrate import Rollout as Rollout

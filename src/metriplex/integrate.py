@@ -23,6 +23,7 @@ from ._solve import (
     DiscreteGradient,
     FixedPoint,
     FixedPointThenNewton,
+    Hermite,
     ImplicitMidpoint,
     Newton,
     Rollout,
@@ -38,7 +39,7 @@ from ._solve import (
 __all__ = ["RK4", "ROOT_FINDERS", "SCHEMES", "AbstractImplicitScheme", "AbstractRootFinder",
            "AbstractScheme",
            "CrankNicolson", "DiscreteGradient", "FixedPoint", "FixedPointThenNewton",
-           "ImplicitMidpoint", "Newton", "Rollout", "discrete_generic_field", "discrete_gradient",
+           "Hermite", "ImplicitMidpoint", "Newton", "Rollout", "discrete_generic_field", "discrete_gradient",
            "model_size", "project_out", "simulate", "solve", "step_failure"]
 
 
@@ -47,5 +48,6 @@ SCHEMES: dict[str, type[AbstractScheme]] = {
     "midpoint": ImplicitMidpoint,
     "discrete-gradient": DiscreteGradient,
     "rk4": RK4,
+    "hermite": Hermite,
 }
 

@@ -33,6 +33,7 @@ from .discrete_gradient import (
     discrete_gradient,
     project_out,
 )
+from .hermite import Hermite
 from .midpoint import ImplicitMidpoint
 from .rk4 import RK4
 from .rollout import Rollout, model_size, simulate, solve, step_failure
@@ -48,6 +49,6 @@ from ._scheme import AbstractScheme
 
 __all__ = ["RK4", "ROOT_FINDERS", "AbstractImplicitScheme", "AbstractRootFinder",
            "AbstractScheme", "CrankNicolson", "DiscreteGradient", "FixedPoint",
-           "FixedPointThenNewton", "ImplicitMidpoint", "Newton", "Rollout",
+           "FixedPointThenNewton", "Hermite", "ImplicitMidpoint", "Newton", "Rollout",
            "discrete_generic_field", "discrete_gradient", "model_size", "project_out", "simulate",
            "solve", "step_failure"]

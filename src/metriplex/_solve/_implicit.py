@@ -57,17 +57,20 @@ class AbstractImplicitScheme(AbstractScheme):
         return None
 
     @abc.abstractmethod
-    def average(self, model: GenericModel, x0: State, x1: State, start: Any) -> State:
-        """The scheme's average of the vector field over the step, ``(x1 - x0)/dt``."""
+    def average(self, model: GenericModel, x0: State, x1: State, start: Any,
+                dt: Scalar | float) -> State:
+        """The scheme's average of the vector field over the step of size ``dt``, ``(x1 -
+        x0)/dt``."""
 
-    def increment(self, model: GenericModel, x0: State, x1: State) -> State:
-        """The step's average of the vector field between ``x0`` and ``x1`` (:meth:`average`
-        with its :meth:`start`)."""
-        return self.average(model, x0, x1, self.start(model, x0))
+    def increment(self, model: GenericModel, x0: State, x1: State,
+                  dt: Scalar | float) -> State:
+        """The average of the vector field over the step ``dt`` from ``x0`` to ``x1``
+        (:meth:`average` with its :meth:`start`)."""
+        return self.average(model, x0, x1, self.start(model, x0), dt)
 
     def differentiable_step(self, model: GenericModel, x: State, dt: Scalar | float,
                             solved: State) -> State:
-        return x + dt * self.increment(model, x, solved)
+        return x + dt * self.increment(model, x, solved, dt)
 
     def step(self, model: GenericModel, x: State, dt: Scalar | float,
              guess: State) -> tuple[State, jax.Array, jax.Array]:
@@ -81,6 +84,6 @@ class AbstractImplicitScheme(AbstractScheme):
 
         def update(x0, x1, args):
             dt, pre = args
-            return dt * self.average(model, x0, x1, pre)
+            return dt * self.average(model, x0, x1, pre, dt)
 
         return self.root_finder.solve_batch(update, x, guess, (dt, pre))

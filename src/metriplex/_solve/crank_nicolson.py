@@ -20,7 +20,8 @@ class CrankNicolson(AbstractImplicitScheme):
         """What the step needs of its first state: the field at ``x0``, computed once per step."""
         return model.vector_field(x0)
 
-    def average(self, model: GenericModel, x0: State, x1: State, start: State) -> State:
+    def average(self, model: GenericModel, x0: State, x1: State, start: State,
+                dt: Scalar | float) -> State:
         r"""The trapezoidal field :math:`\tfrac12(f(x_0) + f(x_1))`, with ``start`` the field at
         ``x0``."""
         return 0.5 * (start + model.vector_field(x1))

@@ -129,7 +129,7 @@ class DiscreteGradient(AbstractImplicitScheme):
         return model.energy(x0), model.entropy(x0)
 
     def average(self, model: GenericModel, x0: State, x1: State,
-                start: tuple[Scalar, Scalar]) -> State:
+                start: tuple[Scalar, Scalar], dt: Scalar | float) -> State:
         """The discrete GENERIC field between ``x0`` and ``x1`` (:func:`discrete_generic_field`),
         with ``start`` the energy and entropy at ``x0``."""
         energy0, entropy0 = start

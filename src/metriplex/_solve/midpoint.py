@@ -16,7 +16,8 @@ class ImplicitMidpoint(AbstractImplicitScheme):
     name: ClassVar[str] = "midpoint"
     summary: ClassVar[str] = "implicit midpoint: keeps a quadratic E"
 
-    def average(self, model: GenericModel, x0: State, x1: State, start: Any) -> State:
+    def average(self, model: GenericModel, x0: State, x1: State, start: Any,
+                dt: Scalar | float) -> State:
         r"""The field at the midpoint, :math:`f(\tfrac12(x_0 + x_1))` (``start`` is not needed)."""
         return model.vector_field(0.5 * (x0 + x1))
 

@@ -236,7 +236,7 @@ def build_loss(config: RunConfig, units: Units | None = None,
     correlated`` measures the residual in :meth:`~metriplex.Units.residual_metric`.
     """
     e, s, tau = (1.0, 1.0, 1.0) if units is None else (units.energy, units.entropy, units.time)
-    scheme = scheme_from_name(config.scheme)
+    scheme = scheme_from_name(config.scheme or "cn")  # train_run gives the data's choice
     metric = None
     if residual_metric_of(config) == "correlated" and data is not None and units is not None:
         metric = units.residual_metric(data)

@@ -105,7 +105,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     from .config import hold_energy_on, reversible_first_on, validate
     from ..io import read
     from .runs import (RunData, check_run_folder, evaluate_run, run_config, train_parts,
-                       write_json)
+                       trained_scheme, write_json)
 
     out = Path(args.out)
     check_run_folder(out, overwrite=args.overwrite, resume=args.resume)
@@ -148,8 +148,8 @@ def cmd_train(args: argparse.Namespace) -> int | None:
         gc.collect()
         # The step check is left to `evaluate`: after training it would add a compilation
         # (seconds) to every run for what the final line does not print.
-        metrics = evaluate_run(model, target, scheme=config.scheme, figures=out / "figures",
-                               progress=not args.quiet, step_check=False)
+        metrics = evaluate_run(model, target, scheme=trained_scheme(saved),
+                               figures=out / "figures", progress=not args.quiet, step_check=False)
         metrics["train_seconds"] = seconds
         metrics["evaluated_on"] = (
             "training data" if valid is None else "validation trajectories" if not in_time
@@ -286,9 +286,9 @@ def _scheme(args) -> str:
     """The --scheme given, else the one the run in args.run was trained with."""
     if args.scheme:
         return args.scheme
-    from .runs import run_config
+    from .runs import run_config, trained_scheme
 
-    return run_config(args.run).get("config", {}).get("scheme", "cn")
+    return trained_scheme(run_config(args.run))
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int | None:

@@ -58,8 +58,9 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
                    + " (invariant features of the state; default none)")
     g.add_argument("--features-for", help="networks that see the features: a comma list of "
                    f"energy, entropy, friction (default {d.features_for})")
-    g.add_argument("--scheme", help=scheme_help("training residual scheme: ",
-                                                         f"default {d.scheme}"))
+    g.add_argument("--scheme", help=scheme_help(
+        "training residual scheme: ", "default: cn, or hermite where the training pairs' steps "
+        "are coarse for the motion they record"))
     w = p.add_argument_group("loss weights and optimisation")
     w.add_argument("--w-traj", type=float, help=f"residual weight (default {d.w_traj})")
     w.add_argument("--w-degeneracy-L", dest="w_degeneracy_L", type=float,

@@ -84,7 +84,7 @@ class RunConfig:
     jacobi_samples: int | None = None
     features: str = "none"
     features_for: str = "energy,entropy"
-    scheme: str = "cn"
+    scheme: str | None = None  # None: cn, or hermite where the training steps are coarse
     w_traj: float = 1.0
     w_degeneracy_L: float = 10.0
     w_degeneracy_M: float = 10.0
@@ -215,7 +215,8 @@ def validate(config: RunConfig, n: int) -> None:
                 f"are made for the system they are named after; leave --features out (none) "
                 f"for other data.") from None
     _feature_blocks(config)
-    scheme_from_name(config.scheme)
+    if config.scheme is not None:
+        scheme_from_name(config.scheme)
     if config.jacobi_samples is not None and config.jacobi_samples < 1:
         raise MetriplexError(
             f"--jacobi-samples must be >= 1 (pairs per batch that the Jacobi penalty sees); got "

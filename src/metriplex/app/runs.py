@@ -9,6 +9,7 @@ owns a run folder (see ``_lock``).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import sys
@@ -30,7 +31,8 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
-from ._data_checks import coarse_note, coarse_steps, data_notes, spacing_note
+from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
+                           data_notes, spacing_note)
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
                      scheme_from_name, temperature_weight, validate)
@@ -265,25 +267,29 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
     first = build_model(config, train, key=model_key, units=units, constant=constant, given=given)
-    coarse = coarse_steps(given_train, spacing, config.scheme)  # said before and after
+    coarse = coarse_steps(given_train, spacing)
+    scheme = config.scheme or chosen_scheme(coarse)  # given, else the data's
     for line in ([] if resume else data_notes(given_train, valid, config.entropy, free)
-                 + coarse_note(coarse, config.scheme) + spacing_note(
+                 + coarse_note(coarse, scheme, config.scheme is None) + spacing_note(
                      given_train, spacing, config.every)) + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     began = time.perf_counter()
+    header_config, config = config.to_json(), dataclasses.replace(config, scheme=scheme)
     loss = build_loss(config, units, train)
     exact_L, exact_M = exact_blocks(config)
     stopping = stopping_for(config)
     repeats = repeats_for(config, valid)
     header = {
-        "config": config.to_json(),
+        "config": header_config,
         # What options left at None/"auto" decided: the run's stages, walls and exact blocks.
         "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
                     "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
-                    "repeats": repeats, "every": spacing, "coarse_steps": coarse},
+                    "repeats": repeats, "every": spacing, "scheme": scheme,
+                    # said after training too, where the scheme learns the step's map
+                    "coarse_steps": None if scheme in FOURTH_ORDER else coarse},
         "names": list(train.names),
         "n": train.n,
         "train_trajectories": [int(i) for i in given_train.ids],
@@ -330,6 +336,12 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         **{f"valid_{k}": np.asarray(v) for k, v in history.valid.items()},
     )
     return model, history, given_train, valid, seconds
+
+
+def trained_scheme(saved: dict) -> str:
+    """The scheme a run trained with (``saved``: its config.json): given, else its data's."""
+    return (saved.get("config") or {}).get("scheme") or saved.get("decided", {}).get("scheme",
+                                                                                      "cn")
 
 
 def run_config(run_dir: str | Path) -> dict:

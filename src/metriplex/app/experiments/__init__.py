@@ -39,7 +39,7 @@ from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
 from .._report import Truth, report_figures
-from ..runs import train_run
+from ..runs import run_config, train_run, trained_scheme
 
 
 def _check_name(name: str) -> Experiment:
@@ -136,7 +136,7 @@ def run_experiment(
     )
     write(out / "train_data.npz", data)
     write(out / "test_data.npz", test)
-    rollout_scheme = config.scheme if defaults else exp.rollout_scheme
+    rollout_scheme = trained_scheme(run_config(out)) if defaults else exp.rollout_scheme
     scheme = scheme_from_name(rollout_scheme)
     horizon = exp.horizon
     # Each model's test rollouts are computed once, for its metrics and for the figures.
