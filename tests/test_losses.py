@@ -194,3 +194,28 @@ def test_negative_temperature_hinge_sees_only_cold_states_and_no_unit():
     assert value(model(1e3), x) == pytest.approx(cold, rel=1e-12)
     with pytest.raises(mx.MetriplexError, match="indices of the entropy variables"):
         mx.NegativeTemperature(())
+
+
+def test_negative_temperature_hinge_has_a_finite_derivative_in_float32_at_any_scale_of_e():
+    # A new-user check (time in ms, a variable of 1e-3) learned an energy of 5e-8 in the data's
+    # units: the square of |D grad E|^2 in the hinge's derivative fell to 0 in float32, and
+    # training went non-finite at its first evaluation. The term is E's scale-free ratio, so
+    # its value and derivative must be those of E at scale 1.
+    from metriplex._model import with_dtype
+
+    x = jr.normal(jr.key(0), (16, 3), dtype=jnp.float32)
+    term = mx.NegativeTemperature((2,)).as_loss()
+    batch = Batch(x, x, jnp.ones(16, jnp.float32), jnp.ones(3, jnp.float32))
+
+    def value_and_grad(scale):
+        energy = mx.MLPPotential(3, width=8, output_scale=scale, key=jr.key(1))
+        model = with_dtype(mx.GenericModel(energy, mx.SumOf((2,)), mx.CanonicalPoisson(3, 1),
+                                           mx.ZeroFriction(3)), jnp.float32)
+        return eqx.filter_jit(eqx.filter_value_and_grad(lambda m: term(m, batch)[0]))(model)
+
+    (v1, g1), (v2, g2) = value_and_grad(1.0), value_and_grad(1e-12)
+    assert v1.dtype == jnp.float32 and float(v1) > 0.0
+    np.testing.assert_allclose(float(v2), float(v1), rtol=1e-5)
+    for a, b in zip(jax.tree.leaves(g1), jax.tree.leaves(g2)):
+        assert np.all(np.isfinite(b))
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-3, atol=1e-6)
