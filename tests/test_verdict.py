@@ -127,6 +127,19 @@ def test_exactly_generic_data_are_not_called_not_consistent_in_any_unit_of_time(
             assert a["value"] == b["value"], a["name"]
 
 
+def test_rollouts_no_better_than_standing_still_give_cannot_tell(particle):
+    # A new-user check: a Van der Pol fit (no GENERIC model exists) whose residuals passed was
+    # called consistent, while its rollouts erred 1.65 against x(t) = x(0)'s 1.35.
+    truth, data, report, reference = particle
+    skill = _reasons(verdict(truth, data, report=report, reference=reference))["rollout_skill"]
+    assert skill["passed"] and skill["value"] < 0.1
+    lost = {**report, "rollout_error_mean_completed":
+            1.2 * report["constant_prediction_error_mean_completed"]}
+    v = verdict(truth, data, report=lost, reference=reference)
+    assert v["outcome"] == CANNOT_TELL, v["statement"]
+    assert "rollout_skill = 1.2 > 1 (" in v["statement"] and "x(t) = x(0)" in v["statement"]
+
+
 def test_a_model_with_the_same_flow_but_L_grad_S_nonzero_is_not_called_consistent(particle):
     # #14: a learned pendulum with |L grad S| relative 0.707 was judged "consistent".
     truth, data, report, reference = particle

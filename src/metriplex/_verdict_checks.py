@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ._precision import in_full_precision
 from ._reference import _finite
 
 CONSISTENT = "consistent"
@@ -383,3 +384,17 @@ def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None
         laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
                     f"{', '.join(worst)}")
     return laws
+
+
+@in_full_precision
+def _said(r: dict[str, Any]) -> str:
+    """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
+    on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum);
+    a maximum failed by another rule that its note gives: ``within its limit but failed``."""
+    v, lim, failed = r["value"], r["threshold"], r["passed"] is False
+    above = isinstance(v, (int, float)) and isinstance(lim, (int, float)) and v > lim
+    if failed and not above and r.get("effect") == NOT_CONSISTENT and isinstance(v, float):
+        return f"{r['name']} = {v:.3g}, within its limit {_fmt(lim)} but failed ({r['note']})"
+    cmp = (">" if above else "<") if failed else (">=" if above else "<=")
+    said = "" if lim is None or isinstance(lim, bool) else f" {cmp} {_fmt(lim)}"
+    return f"{r['name']} = {_fmt(v)}{said} ({r['note']})"

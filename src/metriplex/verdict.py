@@ -44,6 +44,10 @@ name                       limit          meaning
                                           trajectory's first state blew up or an implicit
                                           step did not converge: its rollout figures are
                                           incomplete (cannot tell)
+``rollout_skill``          1              the structured model's completed rollouts err
+                                          more than predicting x(t) = x(0): it predicts
+                                          nothing, and its residuals prove nothing (cannot
+                                          tell)
 ``training_converged``     true           training stopped on a plateau, not on a step or
                                           time cap: a model still improving says little
                                           (cannot tell; unknown without a history)
@@ -164,7 +168,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._precision import in_full_precision
 from ._errors import MetriplexError
 from ._model import GenericModel, float_dtype, weights
 # The black-box reference and the held-out measurements (BlackBoxModel, ... public from here).
@@ -173,9 +176,10 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
                               NOT_CONSISTENT, NOT_POISSON, REVERSIBLE_ONLY, UNIDENTIFIED_SPLIT,
-                              _EVIDENCE, _SPLIT_CHECKS, _SYMPTOMS, _fmt, _residual_checks,
-                              _reversible_only, _soundness_checks, _structure_checks,
+                              _EVIDENCE, _SPLIT_CHECKS, _SYMPTOMS, _residual_checks,
+                              _reversible_only, _said, _soundness_checks, _structure_checks,
                               _violations, _far_beyond)
+from ._verdict_skill import _skill_check
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroPotential
@@ -217,6 +221,7 @@ class Thresholds:
     training_range: float = 6.0
     training_coverage: float = 0.05
     training_roughness: float = 2.0
+    rollout_skill: float = 1.0
 
 
 def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
@@ -240,20 +245,6 @@ def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool 
     else:
         outcome = CONSISTENT
     return outcome
-
-
-@in_full_precision
-def _said(r: dict[str, Any]) -> str:
-    """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
-    on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum);
-    a maximum failed by another rule that its note gives: ``within its limit but failed``."""
-    v, lim, failed = r["value"], r["threshold"], r["passed"] is False
-    above = isinstance(v, (int, float)) and isinstance(lim, (int, float)) and v > lim
-    if failed and not above and r.get("effect") == NOT_CONSISTENT and isinstance(v, float):
-        return f"{r['name']} = {v:.3g}, within its limit {_fmt(lim)} but failed ({r['note']})"
-    cmp = (">" if above else "<") if failed else (">=" if above else "<=")
-    said = "" if lim is None or isinstance(lim, bool) else f" {cmp} {_fmt(lim)}"
-    return f"{r['name']} = {_fmt(v)}{said} ({r['note']})"
 
 
 def verdict(
@@ -335,7 +326,7 @@ def verdict(
     # The checks, in the order of the module docstring's table.
     reasons = _soundness_checks(report, len(data), converged, stopped, th,
                                 held_out=len(pairs.dt) if valid is not None else 0,
-                                fraction=reference.validation)
+                                fraction=reference.validation) + _skill_check(report, th)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
     reasons += compared + _training_checks(data, trained_on, rel_gen, th=th, misfit=any(
         r["name"] == "residual_ratio" and r["passed"] is False for r in compared))
