@@ -197,6 +197,7 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     # An adaptive solver's own steps (about 18 a period) trained a model that erred 16x more at
     # a finer step than at the data's, with nothing said (a new-user check).
     from metriplex.app._data_checks import chosen_scheme, coarse_note, coarse_steps, spacing_note
+    from metriplex.data import roughness
     from metriplex.app._summary import train_summary
     from metriplex.train import History
 
@@ -218,12 +219,22 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     assert "fourth-order Hermite step" in chosen and "--scheme cn" in chosen
     assert coarse_note(rough, "hermite") == []  # given: nothing to say
     assert coarse_note(None) == [] and spacing_note(coarse, 1, None) == []
+    # Pairs further apart on clean data are not said to be for noise (a 40-cell heat rod).
+    (apart,) = spacing_note(coarse, 3, None)
+    assert "no noise on the states" in apart and "as noise" not in apart
     # The final line says its held-out error is at those steps.
     metrics = {"trajectories": 4, "rollout_failures": 0, "rollout_error_mean": 3.5e-3,
                "evaluated_on": "validation trajectories", "coarse_steps": coarse_steps(coarse)}
     line = train_summary(History(), metrics, 1.0, "run")
     assert "at the data's own steps, coarse for their motion (roughness 0.2" in line
     assert coarse_steps(circles(np.arange(0.0, 30.0, 0.05))) is None
+    # A fast transient that has relaxed by the second halves is stiffness, not coarse motion
+    # (a new-user check's heat rod): no fourth-order gain there, so no note and no choice.
+    t = np.arange(0.0, 30.0, 0.1)
+    stiff = circles(t)
+    stiff = mx.Trajectories(stiff.trajectory, stiff.t, np.concatenate(
+        [stiff.x, stiff.x[:, :1] + 20.0 * np.exp(-20.0 * stiff.t)[:, None]], 1))
+    assert roughness(stiff) > 0.5 and coarse_steps(stiff) is None
     # Noisy data get the note on noise instead (pairs further apart), never this one.
     noisy = add_noise(circles(np.arange(0.0, 30.0, 0.05)), 0.05, seed=4)
     assert coarse_steps(noisy, 8) is None

@@ -156,8 +156,10 @@ class FitLoop:
             raise TrainingDiverged(
                 f"training diverged at step {state.done}: the loss term(s) {bad or ['total']} "
                 f"became non-finite. The best model so far (step {history.best_step}) is "
-                "kept on this exception (.model, .history; metriplex train saves it); lower "
-                "the learning rate or the loss weights.",
+                "kept on this exception (.model, .history; metriplex train saves it). Lower "
+                "the learning rate or the loss weights; where it diverges early whatever the "
+                "rate, train in float64 (--float64, fit's dtype=jnp.float64): data whose units "
+                "are far from 1 can under- or overflow float32.",
                 model=eqx.combine(state.best_params, self.static),
                 history=history,
             )
