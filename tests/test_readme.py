@@ -33,3 +33,29 @@ def test_readme_python_example_runs(tmp_path, monkeypatch):
     assert np.isfinite(scope["report"]["rollout_error_mean"])
     history = scope["history"]
     assert history.valid["total"][-1] < history.valid["total"][0]
+
+
+def test_readme_train_defaults_from_python_call_the_api_as_it_is():
+    # The second Python block trains as `metriplex train` does (a full training: too long for
+    # the default run), so its calls are bound to the real signatures without running them.
+    import inspect
+
+    from metriplex import runs
+
+    text = (ROOT / "README.md").read_text()
+    block = re.search(r"\*\*`metriplex train`'s defaults from Python\.\*\*.*?```python\n(.*?)```",
+                      text, re.S).group(1)
+    imports = "from metriplex.runs import evaluate_run, run_config, train_run, trained_scheme\n"
+    assert imports in block
+
+    def checked(name, result):
+        def call(*args, **kwargs):
+            inspect.signature(getattr(runs, name)).bind(*args, **kwargs)
+            return result
+        return call
+
+    scope = {"data": None, "test": None, "train_run": checked("train_run", (None,) * 5),
+             "evaluate_run": checked("evaluate_run", {}), "run_config": checked("run_config", {}),
+             "trained_scheme": checked("trained_scheme", "cn")}
+    exec(compile(block.replace(imports, ""), "README.md", "exec"), scope)
+    assert scope["config"].poisson == "canonical:1" and scope["config"].entropy == "sum:2"
