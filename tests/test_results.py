@@ -584,6 +584,7 @@ def test_many_variables_that_train_poorly_get_the_blocks_for_cells_named():
     poor = {"rollout_error_mean_completed": 0.28}
     (hint,) = cells_hint(poor, RunConfig(), 18)
     assert "--energy local:CELLS --friction local:CELLS" in hint and "18 variables" in hint
+    assert "give them time" in hint  # their steps cost more (a 40-cell rod: 10x)
     assert cells_hint(poor, RunConfig(), 5) == []  # few variables
     assert cells_hint({"rollout_error_mean_completed": 0.01}, RunConfig(), 18) == []
     assert cells_hint(poor, RunConfig(energy="local:6", friction="local:6"), 18) == []

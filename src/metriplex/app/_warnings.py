@@ -174,7 +174,9 @@ def cells_hint(metrics: dict, config: Any, n: int) -> list[str]:
             "alike cells (a chain or a lattice, each cell's fields stored field by field), "
             "--energy local:CELLS --friction local:CELLS learns it as sums over neighbouring "
             "cells (docs/structure.md, States made of cells; on a chain of 6 masses with "
-            "their baths, 0.38 with the default blocks, 0.067 with these, in 3 minutes)."]
+            "their baths, 0.38 with the default blocks, 0.067 with these, in 3 minutes). A "
+            "step of theirs costs more, up to 10x: give them time (a 40-cell heat rod did "
+            "worse with them in 3 minutes, 1.15 against 0.41)."]
 
 
 def structure_warnings(metrics: dict) -> list[str]:
