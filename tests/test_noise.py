@@ -124,10 +124,14 @@ def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_pat
     # A resumed run keeps its spacing: one from before the choice (no decided.every) trained
     # on neighbouring samples.
     del header["decided"]["every"]
+    # ... and its scheme: "cn" among the options, as runs wrote before the data chose it.
+    header["config"]["scheme"] = "cn"
+    del header["decided"]["scheme"]
     (tmp_path / "run" / "config.json").write_text(json.dumps(header))
     train_run(data, config, tmp_path / "run", validation_ids=[4, 5], resume=True,
               progress=False)
-    assert json.loads((tmp_path / "run" / "config.json").read_text())["decided"]["every"] == 1
+    resumed = json.loads((tmp_path / "run" / "config.json").read_text())
+    assert resumed["decided"]["every"] == 1 and resumed["decided"]["scheme"] == "cn"
     # Given (--every K), it is used without a note; K < 1 is refused before anything is read.
     from metriplex.app._data_checks import spacing_note
     from metriplex.app.config import validate

@@ -1,10 +1,9 @@
 """Run folders: what ``metriplex train`` writes and ``rollout``/``evaluate`` read.
 
-A run folder holds ``model.mpx`` (the best model), ``config.json`` (the resolved configuration,
-with the data's variable names and the validation split), ``history.json``, ``checkpoint.ckpt``
-(to resume), ``metrics.json`` and ``figures/`` (each figure as PNG, PDF and the raw NPZ).
-While a training writes it, the folder also holds ``.metriplex.lock``: one training at a time
-owns a run folder (see ``_lock``).
+A run folder holds ``model.mpx`` (the best model), ``config.json`` (the options, what the data
+decided, the variables' names, the split), ``history.json``, ``checkpoint.ckpt`` (to resume),
+``metrics.json``, ``figures/`` (PNG, PDF, NPZ) and, while a training writes it,
+``.metriplex.lock``: one training at a time owns a run folder (see ``_lock``).
 """
 
 from __future__ import annotations
@@ -246,8 +245,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
-        said = _resume_differences(RunConfig.from_json(stored), config)
-        if said:
+        if config.scheme is None:  # the interrupted run's, given or chosen (cn before the choice)
+            config = dataclasses.replace(config, scheme=trained_scheme(saved))
+        if said := _resume_differences(RunConfig.from_json(stored), config):
             raise MetriplexError(
                 f"--resume needs the options of the interrupted run, but they differ: {said}. "
                 "Repeat the original options (config.json in the run folder lists them), or "
@@ -340,8 +340,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
 
 def trained_scheme(saved: dict) -> str:
     """The scheme a run trained with (``saved``: its config.json): given, else its data's."""
-    return (saved.get("config") or {}).get("scheme") or saved.get("decided", {}).get("scheme",
-                                                                                      "cn")
+    given, decided = saved.get("config") or {}, saved.get("decided") or {}
+    return given.get("scheme") or decided.get("scheme") or "cn"
 
 
 def run_config(run_dir: str | Path) -> dict:
