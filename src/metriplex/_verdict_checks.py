@@ -132,10 +132,10 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
             sens_note = (f"refining the time step 4x changes {_fmt(sens)} of the structured "
                          "model's predicted motion" + (
                              "" if sens_pass else ": its predictions hold only for its scheme "
-                             "at the data's step (a field fitted to that scheme, or a step that "
-                             "does not resolve the dynamics), so it is not a model of dx/dt "
-                             "between samples; sample more finely, or train with --scheme "
-                             "discrete-gradient or midpoint and compare"))
+                             "at the data's step (a field fitted to that scheme, a step coarse "
+                             "for the data, or a learned field wild between the samples), so it "
+                             "is not a model of dx/dt there; if `train` noted coarse steps, "
+                             "sample more finely, else train longer or on more trajectories"))
         reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
                                CANNOT_TELL, sens_note))
     return reasons

@@ -245,9 +245,9 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
-        if config.scheme is None:  # the interrupted run's, given or chosen (cn before the choice)
-            config = dataclasses.replace(config, scheme=trained_scheme(saved))
-        if said := _resume_differences(RunConfig.from_json(stored), config):
+        was = dataclasses.replace(RunConfig.from_json(stored), scheme=trained_scheme(saved))
+        config = dataclasses.replace(config, scheme=config.scheme or was.scheme)
+        if said := _resume_differences(was, config):
             raise MetriplexError(
                 f"--resume needs the options of the interrupted run, but they differ: {said}. "
                 "Repeat the original options (config.json in the run folder lists them), or "
