@@ -254,12 +254,12 @@ def coarse_steps(data: Trajectories, spacing: int = 1, scheme: str = "cn") -> fl
     else ``None``. Motion that stays coarse is what a fourth-order scheme learns better; a
     fast transient that has relaxed by the second half (stiff: a new-user check's 40-cell heat
     rod, roughness 0.28 over the whole, 0.035 over the second halves) is none of its gain."""
+    from .._roughness import _spread
     from ..data import noise_level, roughness
 
     if scheme in FOURTH_ORDER:
         return None
-    scale = np.std(np.asarray(data.x, dtype=np.float64), axis=0)
-    scale = np.where(scale > 0, scale, 1.0)
+    scale = _spread(data.x)  # the whole data's, for the second halves too
     near = roughness(data, scale, spacing=spacing)
     if near is None or near <= COARSE_STEPS or noise_level(data) >= CLEAN:
         return None
