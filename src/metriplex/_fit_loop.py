@@ -22,10 +22,7 @@ from ._errors import TrainingDiverged
 from ._interrupt import CtrlC
 from ._optimizers import annealing, learning_rate_of, with_learning_rate
 from ._train import History, TrainState, make_lbfgs_chunk, spread
-from ._progress import progress_bar
-
-#: tqdm's bar without its estimate of the time left, for a fit under a time budget.
-TIMED_BAR = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}, {rate_fmt}{postfix}]"
+from ._progress import TIMED_BAR, progress_bar
 from ._validate import rollout_score
 
 if TYPE_CHECKING:

@@ -13,6 +13,10 @@ from tqdm.auto import tqdm
 #: Seconds between redraws of a bar written to a file or a pipe.
 PIPED_INTERVAL = 30.0
 
+#: tqdm's bar without its estimate of the time left: for work under a time budget, whose end
+#: is not the bar's total (a fit's step cap), the caller shows the time left itself.
+TIMED_BAR = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}, {rate_fmt}{postfix}]"
+
 
 def progress_bar(**kwargs: Any) -> tqdm:
     """``tqdm(**kwargs)``, redrawn at most every :data:`PIPED_INTERVAL` s where its stream

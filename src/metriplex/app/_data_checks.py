@@ -272,9 +272,7 @@ def _second_halves(data: Trajectories) -> Trajectories:
     from ..data import Trajectories
 
     lengths = data.lengths()
-    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
-    index = np.arange(len(data.t)) - np.repeat(starts, lengths)
-    keep = index >= np.repeat(lengths // 2, lengths)
+    keep = data._positions() >= np.repeat(lengths // 2, lengths)  # place in its trajectory
     return Trajectories(data.trajectory[keep], data.t[keep], data.x[keep], data.names)
 
 
