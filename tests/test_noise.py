@@ -243,3 +243,29 @@ def test_train_notes_clean_pairs_whose_steps_are_coarse_for_the_motion():
     noisy = add_noise(circles(np.arange(0.0, 30.0, 0.05)), 0.05, seed=4)
     assert coarse_steps(noisy, 8) is None
     assert all("coarse" not in n for n in spacing_note(noisy, 8, None))
+
+
+def test_uneven_steps_count_by_their_duration_so_long_steps_among_short_ones_read_coarse():
+    # A chain sampled at random times (steps from 1e-5 to 1.1) read 0.15 "rough" counted by
+    # pairs, its many short steps hiding the long ones that set a rollout's error, and trained
+    # with Crank-Nicolson at 3.5x the Hermite step's error with nothing said (new-user check 13).
+    from metriplex.app._data_checks import coarse_steps
+    from metriplex.data import roughness
+
+    def circles(t):
+        return mx.Trajectories(np.repeat(np.arange(4), len(t)), np.tile(t, 4), np.concatenate(
+            [np.stack([np.sin(t + a), np.cos(t + a)], 1) for a in (0.0, 1.0, 2.0, 3.0)]))
+
+    def by_pairs(data):  # every neighbouring pair of pairs counted once
+        x, t = data.x / data.x.std(axis=0), data.t
+        v = np.diff(x, axis=0) / np.diff(t)[:, None]
+        ok = data.trajectory[:-2] == data.trajectory[2:]
+        a, b = v[:-1][ok], v[1:][ok]
+        return np.sqrt(np.sum((b - a) ** 2) / 3 / (0.5 * np.sum(a * a + b * b)))
+
+    even = circles(np.arange(0.0, 30.0, 0.2))  # on an even grid the weights change nothing
+    assert roughness(even) == pytest.approx(by_pairs(even), rel=1e-12)
+    # Every tenth step 1.0 long, the others 0.01: by pairs mostly smooth, by time coarse.
+    uneven = circles(np.concatenate([[0.0], np.cumsum(np.tile([0.01] * 9 + [1.0], 20))]))
+    assert by_pairs(uneven) < 0.15 < roughness(uneven)
+    assert coarse_steps(uneven) == roughness(uneven)
