@@ -182,12 +182,16 @@ from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISS
 from ._verdict_skill import _skill_check
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
-from .structure import ZeroPotential
+from .structure import ZeroFriction, ZeroPotential
 
 if TYPE_CHECKING:
     from ._train import History
     from ._units import Units
     from .integrate import AbstractScheme
+
+#: What a "consistent" adds in place of ``REVERSIBLE_ONLY`` where M was given as zero: it
+#: spoke of "the learned friction" beside a friction given as none (new-user check 13).
+CONSERVATIVE = "The model is conservative, as given (M = 0): L grad E drives all of the motion."
 
 __all__ = ["CANNOT_TELL", "CONSISTENT", "EXIT_STATUS", "NOT_CONSISTENT", "BlackBoxModel",
            "Reference", "Thresholds", "train_reference", "verdict"]
@@ -355,7 +359,9 @@ def verdict(
                          "(history=): a model still improving would be 'cannot tell'.") + (
                          " " + sr["identified"]["statement"][0].upper()
                          + sr["identified"]["statement"][1:]) + (
-                         " " + REVERSIBLE_ONLY if _reversible_only(sr, entropy_free) else ""))
+                         "" if not _reversible_only(sr, entropy_free) else " " + (
+                             CONSERVATIVE if isinstance(model.friction, ZeroFriction)
+                             else REVERSIBLE_ONLY)))
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
