@@ -689,14 +689,20 @@ def test_a_consistent_fit_by_l_grad_e_alone_says_it_identifies_no_dissipation():
     energy = mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2) + x[2])
     learned_s = mx.MLPPotential(3, width=8, data=data.x, key=jr.key(0))
     from metriplex._verdict_checks import REVERSIBLE_ONLY
+    from metriplex.verdict import CONSERVATIVE
 
-    for entropy, said in ((learned_s, True), (mx.SumOf((2,)), False)):
-        model = mx.GenericModel(energy, entropy, mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    idle = mx.KnownFriction(lambda x: jnp.zeros((3, 3), x.dtype))  # a friction that never acts
+    for entropy, friction, said in ((learned_s, idle, REVERSIBLE_ONLY),
+                                    (mx.SumOf((2,)), idle, None),
+                                    # M given as zero: nothing learned to speak of (audit 13)
+                                    (learned_s, mx.ZeroFriction(3), CONSERVATIVE)):
+        model = mx.GenericModel(energy, entropy, mx.CanonicalPoisson(3, 1), friction)
         report = mx.evaluate(model, data, scheme=mx.RK4(), step_check=False)
         v = verdict(model, data, report=report, reference=reference, converged=True,
                     stopped="converged")
         assert v["outcome"] == CONSISTENT, v["statement"]
-        assert (REVERSIBLE_ONLY in v["statement"]) is said
+        for statement in (REVERSIBLE_ONLY, CONSERVATIVE):
+            assert (statement in v["statement"]) is (statement == said)
 
 
 def test_noise_on_the_states_is_named_where_the_reference_fails():
@@ -715,11 +721,32 @@ def test_a_time_capped_training_is_told_to_take_more_time():
     from metriplex.verdict import Thresholds
 
     report = {"rollout_failures": 0, "trajectories": 4}
-    for stopped, advice in (("time budget reached (80 s) at step 27900", "--max-minutes"),
-                            ("step budget reached (3000 steps)", "--steps")):
+    # A resumed run's budget counts the time already trained: resuming with the same
+    # --max-minutes added only what was left of it (new-user check 13).
+    for stopped, advice in (("time budget reached (80 s) at step 27900",
+                             "--resume with a larger --max-minutes: the budget counts the time "
+                             "already trained"),
+                            ("step budget reached (3000 steps)", "--steps, or --resume")):
         r = [c for c in _soundness_checks(report, 4, False, stopped, Thresholds(), held_out=50,
                                           fraction=0.2) if c["name"] == "training_converged"][0]
-        assert f"train longer ({advice}) or --resume" in r["note"]
+        assert f"train longer ({advice})" in r["note"]
+
+
+def test_a_step_sensitive_model_that_converged_is_not_told_to_train_longer():
+    # A converged run was told to "train longer"; resumed, it was the same model (new-user
+    # check 13, a chain sampled at uneven, coarse steps).
+    from metriplex._verdict_checks import _soundness_checks
+    from metriplex.verdict import Thresholds
+
+    report = {"rollout_failures": 0, "trajectories": 4, "step_sensitivity": 0.3}
+    notes = {}
+    for converged in (True, False):
+        notes[converged] = [c for c in _soundness_checks(
+            report, 4, converged, None, Thresholds(), held_out=50, fraction=0.2)
+            if c["name"] == "step_sensitivity"][0]["note"]
+        assert "--scheme hermite" in notes[converged]
+    assert "else train on more trajectories" in notes[True] and "longer" not in notes[True]
+    assert "else train longer or on more trajectories" in notes[False]
 
 
 def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():

@@ -71,13 +71,10 @@ def _reason(name, value, threshold, passed, effect, note) -> dict[str, Any]:
 
 
 def _fmt(v) -> str:
-    if v is None:
-        return "null"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    return f"{v:.2g}"
+    """A check's value as the statements write it: JSON's words, whole numbers, 2 digits."""
+    if v is None or isinstance(v, bool):
+        return {None: "null", True: "true", False: "false"}[v]
+    return str(v) if isinstance(v, int) else f"{v:.2g}"
 
 
 def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool | None,
@@ -114,13 +111,12 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
     elif converged:
         conv_note, conv_pass = f"training converged ({stopped or 'on a plateau'})", True
     else:
-        conv_note = (f"training did not converge ({stopped or 'stopped before a plateau'}): "
-                     "the model may still improve; train longer ("
-                     + ("--max-minutes" if (stopped or "").startswith("time budget")
-                        else "--steps") + ") or --resume")
-        conv_pass = False
-    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
-                           conv_note))
+        how = stopped or "stopped before a plateau"
+        conv_note, conv_pass = (f"training did not converge ({how}): the model may still "
+                                "improve; train longer (" + (
+            "--resume with a larger --max-minutes: the budget counts the time already trained)"
+            if how.startswith("time budget") else "--steps, or --resume)")), False
+    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL, conv_note))
     sens = report.get("step_sensitivity", "absent")
     if sens != "absent":
         sens = _finite(sens)
@@ -135,7 +131,9 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
                              "at the data's step (a field fitted to that scheme, a step coarse "
                              "for the data, or a learned field wild between the samples), so it "
                              "is not a model of dx/dt there; if `train` noted coarse steps, "
-                             "sample more finely, else train longer or on more trajectories"))
+                             "sample more finely (or train with --scheme hermite where it did "
+                             "not), else train " + ("on more trajectories" if converged
+                                                    else "longer or on more trajectories")))
         reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
                                CANNOT_TELL, sens_note))
     return reasons
