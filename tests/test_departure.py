@@ -35,3 +35,21 @@ def test_evaluated_data_beyond_the_training_data_are_named():
     assert "1 of 3 trajectories (1)" in line and "T at 7.5 training standard deviations" in line
     assert training_range_warning(UNITS, data.select([0, 2])) == []
     assert training_range_warning({}, data) == []  # an older run without units
+
+
+def test_a_share_of_evaluated_states_beyond_three_standard_deviations_is_noted():
+    # Test states of higher energy than any training one (12 % beyond 3 sd, none beyond the
+    # range named above) erred 4x the validation error with nothing said (new-user check 13).
+    import metriplex as mx
+    from metriplex.app._warnings import training_range_warning
+
+    t = np.arange(10) * 0.1
+    q = np.linspace(-1, 1, 10)
+    inside = np.stack([q, np.full(10, 10.0)], axis=1)
+    beyond = np.stack([q, 10.0 + 0.5 * np.r_[np.zeros(8), 4.0, 4.0]], axis=1)  # T at 4 sd
+    (line,) = training_range_warning(UNITS, mx.Trajectories.from_list(
+        [(t, inside), (t, beyond)], ("q", "T")))
+    assert line.startswith("note: 10% of the evaluated states lie beyond 3 training standard")
+    assert "(most often T)" in line
+    few = mx.Trajectories.from_list([(t, inside)] * 3 + [(t, beyond)], ("q", "T"))  # 5 %
+    assert training_range_warning(UNITS, few) == []
