@@ -363,7 +363,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="write the rows to this JSON file")
     ap.add_argument("--verdict", action="store_true",
                     help="also give each trained model evaluate's verdict on the test data")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="override a training setting (RunConfig field), e.g. scheme=hermite")
     args = ap.parse_args(argv)
+    overrides = zoo.parse_overrides(args.set)
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     names = [c.strip() for c in args.cases.split(",") if c.strip()]
     unknown = sorted(set(names) - set(CASES))
@@ -374,7 +377,7 @@ def main(argv=None) -> int:
           "train s |\n|---|---|---|---|---|---|---|---|")
     for name in names:
         case = CASES[name]
-        row = zoo.run_case(case, {}, Path(tempfile.mkdtemp()), seed=args.seed,
+        row = zoo.run_case(case, overrides, Path(tempfile.mkdtemp()), seed=args.seed,
                            with_black_box=True, with_verdict=args.verdict)
         row["truth_cn_standardised"] = truth_error(case, args.seed)
         rows.append(row)
