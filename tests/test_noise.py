@@ -249,7 +249,7 @@ def test_uneven_steps_count_by_their_duration_so_long_steps_among_short_ones_rea
     # A chain sampled at random times (steps from 1e-5 to 1.1) read 0.15 "rough" counted by
     # pairs, its many short steps hiding the long ones that set a rollout's error, and trained
     # with Crank-Nicolson at 3.5x the Hermite step's error with nothing said (new-user check 13).
-    from metriplex.app._data_checks import coarse_steps
+    from metriplex.app._data_checks import COARSE_STEPS, coarse_steps
     from metriplex.data import roughness
 
     def circles(t):
@@ -265,7 +265,7 @@ def test_uneven_steps_count_by_their_duration_so_long_steps_among_short_ones_rea
 
     even = circles(np.arange(0.0, 30.0, 0.2))  # on an even grid the weights change nothing
     assert roughness(even) == pytest.approx(by_pairs(even), rel=1e-12)
-    # Every tenth step 1.0 long, the others 0.01: by pairs mostly smooth, by time coarse.
-    uneven = circles(np.concatenate([[0.0], np.cumsum(np.tile([0.01] * 9 + [1.0], 20))]))
-    assert by_pairs(uneven) < 0.15 < roughness(uneven)
+    # Every tenth step 0.6 long, the others 0.01: by pairs smooth, by time coarse.
+    uneven = circles(np.concatenate([[0.0], np.cumsum(np.tile([0.01] * 9 + [0.6], 20))]))
+    assert by_pairs(uneven) < COARSE_STEPS < roughness(uneven)
     assert coarse_steps(uneven) == roughness(uneven)

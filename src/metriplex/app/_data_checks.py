@@ -232,11 +232,12 @@ def operators_note(path: str | Path, poisson: str, friction: str) -> list[str]:
             + ("them" if len(unused) > 1 else "it") + " as given."]
 
 
-#: Above this roughness of clean training pairs (about omega dt = 0.26, 24 samples a period)
-#: train notes that the steps are coarse: 0.013-0.032 on the zoo's data, at most 0.11 on
-#: those of the reference experiments and of nine systems outside the zoo; 0.16 on a new-user
-#: check's adaptive solver steps, whose model erred 16x more at a finer step.
-COARSE_STEPS = 0.15
+#: Above this roughness of clean training pairs (about omega dt = 0.14, 45 samples a period),
+#: over the whole trajectories and their second halves, the steps are coarse and train takes
+#: the Hermite step: 0.013-0.032 on the zoo's data; outside it, two systems at 0.086 and 0.089
+#: were 2.4x and 1.4x more accurate with it, two at 0.07 no more (1.0x, 0.9x); a new-user
+#: check's adaptive solver steps (0.16) 22x, another's chain at uneven steps (0.19) 3.5x.
+COARSE_STEPS = 0.08
 #: Below this noise level (a fraction of each variable's spread) the pairs' roughness is the
 #: motion's, not the noise's.
 CLEAN = 0.002
