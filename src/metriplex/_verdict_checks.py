@@ -116,7 +116,8 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
                                 "improve; train longer (" + (
             "--resume with a larger --max-minutes: the budget counts the time already trained)"
             if how.startswith("time budget") else "--steps, or --resume)")), False
-    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL, conv_note))
+    reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
+                           conv_note))
     sens = report.get("step_sensitivity", "absent")
     if sens != "absent":
         sens = _finite(sens)

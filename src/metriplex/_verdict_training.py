@@ -34,21 +34,28 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
 BEYOND = 3.0
 
 
+def beyond_share(data, trained_on) -> tuple[float, str]:
+    """The share of ``data``'s states beyond ``BEYOND`` standard deviations of the training
+    data's mean (``trained_on``, their :class:`~metriplex.Units`) in some variable, and the
+    variable most often beyond."""
+    x = np.asarray(data.x, dtype=np.float64)
+    z = np.abs((x - np.asarray(trained_on.shift)) / np.asarray(trained_on.scale))
+    beyond = np.isfinite(z) & (z > BEYOND)
+    share = float(np.mean(np.any(beyond, axis=1))) if len(x) else 0.0
+    return share, data.names[int(np.argmax(np.sum(beyond, axis=0)))]
+
+
 def _coverage_check(data, trained_on, *, ratio_failed: bool, th) -> list[dict[str, Any]]:
     """``training_coverage``: the share of ``data``'s states beyond ``BEYOND`` standard
     deviations of the training data's mean (``trained_on``) in some variable. A model trained
     on few trajectories (one long one, say) misses states that others reach well within
     ``training_range``, and its misfit there is how it extrapolates, while the reference trains
     on these data. Judged only where the residual ratio failed (``ratio_failed``)."""
-    x = np.asarray(data.x, dtype=np.float64)
-    z = np.abs((x - np.asarray(trained_on.shift)) / np.asarray(trained_on.scale))
-    beyond = np.isfinite(z) & (z > BEYOND)
-    share = float(np.mean(np.any(beyond, axis=1))) if len(x) else 0.0
+    share, most = beyond_share(data, trained_on)
     if not ratio_failed:
         passed, note = None, "not judged: the residual ratio passes"
     else:
         passed = share <= th.training_coverage
-        most = data.names[int(np.argmax(np.sum(beyond, axis=0)))]
         note = (f"{share:.1%} of these states lie beyond {BEYOND:g} standard deviations of "
                 "the training data's mean in some variable" + ("" if passed else
                 f" (most often {most}): the model was not trained where these data go, so "

@@ -269,16 +269,11 @@ def _coverage_note(trained: Units, data: Trajectories) -> list[str]:
     lie beyond ``BEYOND`` training standard deviations in some variable, though none as far as
     :func:`training_range_warning` names: a test of mild extrapolation erred 4x its validation
     error with nothing said (new-user check 13, 12 % of its states beyond)."""
-    import numpy as np
+    from .._verdict_training import BEYOND, beyond_share
 
-    from .._verdict_training import BEYOND
-
-    z = np.abs((np.asarray(data.x, np.float64) - trained.shift) / np.asarray(trained.scale))
-    beyond = np.isfinite(z) & (z > BEYOND)
-    share = float(np.mean(np.any(beyond, axis=1))) if len(z) else 0.0
+    share, most = beyond_share(data, trained)
     if share <= _LIMITS.training_coverage:
         return []
-    most = data.names[int(np.argmax(beyond.sum(axis=0)))]
     return [f"note: {share:.0%} of the evaluated states lie beyond {BEYOND:g} training standard "
             f"deviations of the training mean in some variable (most often {most}): there the "
             "model extrapolates, and the errors grow with how far it must."]
