@@ -8,13 +8,17 @@ against the structure, since the black-box reference trains on the judged data t
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._reference import _finite
 from ._verdict_checks import CANNOT_TELL, _fmt, _reason
 from .data import roughness
+
+if TYPE_CHECKING:
+    from ._units import Units
+    from .data import Trajectories
 
 
 def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
@@ -34,7 +38,7 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
 BEYOND = 3.0
 
 
-def beyond_share(data, trained_on) -> tuple[float, str]:
+def beyond_share(data: Trajectories, trained_on: Units) -> tuple[float, str]:
     """The share of ``data``'s states beyond ``BEYOND`` standard deviations of the training
     data's mean (``trained_on``, their :class:`~metriplex.Units`) in some variable, and the
     variable most often beyond."""
