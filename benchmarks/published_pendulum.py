@@ -63,6 +63,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from zoo import _fmt, black_box, parse_overrides, train_and_test  # noqa: E402
 
 from metriplex.config import RunConfig, scheme_from_name  # noqa: E402
+from metriplex.app.runs import trained_scheme  # noqa: E402
 from metriplex.diagnostics import evaluate  # noqa: E402
 from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.systems import SYSTEMS, generate  # noqa: E402
@@ -114,7 +115,8 @@ def run(kind: str, given: list[str], overrides: dict, workdir: Path) -> list[dic
         base = FLAGS if flags == "physics" else file_flags(workdir)
         config = dataclasses.replace(RunConfig(), **{**base, **overrides})  # --set may override
         row = _train_and_test(system, train, test, config, workdir / f"{kind}-{flags}")
-        box = black_box(train, test, config, horizon=SHORT) if box is None else box
+        box = black_box(train, test, dataclasses.replace(config, scheme=row["scheme"]),
+                        horizon=SHORT) if box is None else box
         rows.append({"data": kind, "given": flags, **row, "black_box": box})
     return rows
 
@@ -125,6 +127,7 @@ def _train_and_test(system, train, test, config, out: Path) -> dict:
     truth = {name: evaluate(system.model, test, scheme=scheme_from_name(name))
              for name in ("cn", "midpoint", "discrete-gradient")}
     return {
+        "scheme": trained_scheme(run["header"]),  # given, or the one the data chose
         "rel_l2": report["rollout_error_mean"],
         "to_short": report["rollout_error_to_horizon_mean"],
         "rel_l2_completed": report["rollout_error_mean_completed"],

@@ -63,6 +63,7 @@ from zoo import (  # noqa: E402
     train_and_test,
 )
 
+from metriplex.app.runs import trained_scheme  # noqa: E402
 from metriplex.config import RunConfig  # noqa: E402
 from metriplex.data import Trajectories  # noqa: E402
 
@@ -161,7 +162,8 @@ def main(argv=None) -> int:
         run = train_and_test(train, test, config, Path(tmp) / "run", horizon=short)
         history, report, rollout = run["history"], run["report"], run["rollout"]
         standardised, seconds = run["standardised"], run["seconds"]
-        box = black_box(train, test, config, horizon=short)
+        box = black_box(train, test, dataclasses.replace(
+            config, scheme=trained_scheme(run["header"])), horizon=short)
         print(f"  done in {time.perf_counter() - t0:.0f} s", flush=True)
     print(f"\n| model | rel. L2 | to t = {short:.3g} | standardised | failed | steps (kept) "
           "| train s |")

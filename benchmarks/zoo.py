@@ -63,7 +63,6 @@ from metriplex.diagnostics import evaluate, rollout_data  # noqa: E402
 from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.losses import SchemeResidual  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
-from metriplex.app._data_checks import chosen_scheme, coarse_steps  # noqa: E402
 from metriplex.app.runs import train_run, trained_scheme  # noqa: E402
 from metriplex._standardised import standardised_errors  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
@@ -127,7 +126,8 @@ def constant_drift(data, rollout) -> float | None:
 def black_box(train, test, config: RunConfig, horizon: float | None = None) -> dict:
     """Standardised and plain rel. L2 and failed rollouts on ``test`` of an unconstrained field
     trained on ``train`` by ``fit`` with its defaults and, as ``config``'s GENERIC model, the
-    same validation split, the residual of the same scheme, the same width, depth and
+    same validation split, the residual of the same scheme (``config.scheme``: the one the
+    GENERIC model trained with, ``trained_scheme`` of its run), the same width, depth and
     precision (activation: softplus; input statistics and rate units from all of ``train``).
 
     A discrete-gradient step needs E, S, L and M, which a bare field has not: with that scheme
@@ -138,7 +138,7 @@ def black_box(train, test, config: RunConfig, horizon: float | None = None) -> d
     dtype = jnp.float64 if config.float64 else jnp.float32
     box = BlackBoxModel(train.n, width=config.width, depth=config.depth, data=train.x, rate=rate,
                         key=jr.key(config.seed))
-    given = config.scheme or chosen_scheme(coarse_steps(train))  # as train's, where not given
+    given = config.scheme or "cn"  # the GENERIC model's: trained_scheme of its run
     name = "cn" if isinstance(scheme_from_name(given), DiscreteGradient) else given
     scheme = scheme_from_name(name)
     t0 = time.perf_counter()
@@ -258,7 +258,8 @@ def run_case(case, overrides: dict, workdir: Path, seed: int = 0,
         **{k: header.get(k) for k in ("trainings", "kept_training")},
         "data_seconds": gen_seconds,
         "overrides": overrides,
-        "black_box": black_box(train, test, config) if with_black_box else None,
+        "black_box": black_box(train, test, dataclasses.replace(
+            config, scheme=trained_scheme(header))) if with_black_box else None,
         "verdict": verdict_row(run, test, config) if with_verdict else None,
     }
 
