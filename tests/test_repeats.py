@@ -159,3 +159,65 @@ def test_an_interrupted_train_says_whether_there_is_anything_to_resume(tmp_path,
     assert "--resume" in _what_is_kept(args)
     check_run_folder(tmp_path, resume=True)
     assert _what_is_kept(argparse.Namespace(command="evaluate", out=str(tmp_path))) == ""
+
+
+def test_the_last_of_three_trainings_learns_the_pairwise_exchange_where_l_is_zero():
+    heat = RunConfig(poisson="zero", entropy="sum:0,1,2")
+    last = _repeats.config_for(heat, 2, 3)
+    assert last.friction == "exchange" and last.poisson == "zero"
+    assert heat.friction == "neural"  # the run's own settings are untouched
+    # Only the last of three or more, only where L = 0 beside an entropy and the friction is
+    # the default Cholesky form.
+    assert _repeats.config_for(heat, 1, 3) is heat
+    assert _repeats.config_for(heat, 2, 4) is heat
+    assert _repeats.config_for(heat, 3, 4).friction == "exchange"
+    assert _repeats.config_for(heat, 1, 2) is heat
+    for other in (RunConfig(poisson="canonical:1", entropy="sum:2"),
+                  RunConfig(poisson="zero", entropy="zero"),
+                  RunConfig(poisson="zero", entropy="sum:0,1", friction="diagonal"),
+                  RunConfig()):
+        assert _repeats.config_for(other, 2, 3) is other
+
+
+def test_a_training_with_other_settings_says_so_and_its_outcome_keeps_them(tmp_path, capsys):
+    calls = []
+
+    def one(r, resumed):
+        calls.append(r)
+        return f"model {r}", [_history(0.5), _history(0.4), _history(0.1)][r]
+
+    change = {2: "--friction exchange"}.get
+    _, _, outcomes, chosen = _repeats.train_repeats(
+        one, repeats=3, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, change=lambda r: change(r, ""))
+    assert chosen == 2 and [o.change for o in outcomes] == ["", "", "--friction exchange"]
+    err = capsys.readouterr().err
+    assert "training 2 of at most 3 from another initialisation" in err
+    assert "training 3 of at most 3 with --friction exchange" in err
+    note = _repeats.trainings_note({"trainings": [o.to_json() for o in outcomes],
+                                    "kept_training": chosen})
+    assert note.startswith("kept training 3 of 3, with --friction exchange (")
+    assert "0.1 [--friction exchange]" in note
+
+
+def test_a_run_that_keeps_the_exchange_records_it_and_its_model_has_it(tmp_path, monkeypatch):
+    from helpers import oscillator_data
+
+    # Every training "converged" untrained and poor, the one with other settings ranked first
+    # whatever its score: what is checked is the record of a kept exchange (which training
+    # the held-out rollouts choose is the test above's), without compiling a training.
+    monkeypatch.setattr(_repeats, "fit", lambda model, *a, **k: (model, _history(0.5)))
+    monkeypatch.setattr(_repeats.Outcome, "rank", lambda self: (not self.change, self.score))
+    data = oscillator_data()
+    config = RunConfig(poisson="zero", entropy="sum:2", width=8, steps=200, eval_every=10,
+                       patience=1, lr_cuts=0)
+    out = tmp_path / "run"
+    model, *_ = train_run(data, config, out, progress=False, trajectories=range(6),
+                          validation_ids=[4, 5])
+    header = json.loads((out / "config.json").read_text())
+    assert [t["change"] for t in header["trainings"]] == ["", "", "--friction exchange"]
+    assert header["kept_training"] == 2 and header["decided"]["friction"] == "exchange"
+    assert header["config"]["friction"] == "neural"  # what the user gave stays
+    assert header["decided"]["exact_friction_degeneracy"] is True
+    assert header["loss_terms"] == ["residual"]  # no penalty where M grad E = 0 is exact
+    assert isinstance(mx.load(out).friction, mx.structure.ExchangeFriction)

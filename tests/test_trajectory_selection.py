@@ -289,26 +289,26 @@ def test_resume_compares_what_decided_options_decide():
     # default became None) resumes with the option left out where it decides the same; a real
     # difference names the flags, not False/None.
     from metriplex.app.config import RunConfig
-    from metriplex.app.runs import _resume_differences
+    from metriplex.app._resume import resume_differences
 
     given = RunConfig(entropy="sum:2", poisson="canonical:1")  # the wall decided: on
-    assert _resume_differences(dataclasses.replace(given, confine=True), given) == ""
-    assert _resume_differences(dataclasses.replace(given, reversible_first=True,
+    assert resume_differences(dataclasses.replace(given, confine=True), given) == ""
+    assert resume_differences(dataclasses.replace(given, reversible_first=True,
                                                    w_temperature=1.0), given) == ""
-    said = _resume_differences(dataclasses.replace(given, confine=False), given)
+    said = resume_differences(dataclasses.replace(given, confine=False), given)
     assert said == "it ran with --no-confine, this command gives --confine"
     penalty = RunConfig(degeneracy="soft")  # M grad E = 0 a penalty: the wall decided off
-    assert _resume_differences(dataclasses.replace(penalty, confine=False), penalty) == ""
+    assert resume_differences(dataclasses.replace(penalty, confine=False), penalty) == ""
 
 
 def test_resume_names_the_step_that_gave_a_file_its_times():
     # A file without times trained with --dt 0.1 and resumed with --dt 0.2 has other data
     # (other times): the refusal names both steps. (A file with its own times never gets
     # that far with another step: its read refuses it.)
-    from metriplex.app.runs import _check_resume
+    from metriplex.app._resume import check_resume
 
     info = {"file": "d.mat", "trajectory_ids": [0, 1], "shape": [40, 2]}
     with pytest.raises(mx.MetriplexError, match=r"it trained on 'd\.mat' with --dt 0\.1 .*; "
                        r"this command gives 'd\.mat' with --dt 0\.2 .*same --dt"):
-        _check_resume({"data": {**info, "dt": 0.1, "sha256": "a" * 64}},
+        check_resume({"data": {**info, "dt": 0.1, "sha256": "a" * 64}},
                       {**info, "dt": 0.2, "sha256": "b" * 64}, None, None)

@@ -26,7 +26,8 @@ from .._units import Units
 from ..data import Trajectories
 from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
-from ._build import Given, build_model, fit_settings, input_noise_of
+from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
+from ._option import option
 from ._stages import before_main, left_of
 from .config import RunConfig
 
@@ -44,6 +45,28 @@ REPEATS = 3
 #: accuracy the zoo's bar asks; 0.1 left charged-particle at one training and 4.5e-2 where
 #: this trains it twice to 1.9e-2, and no zoo case lost (docs/zoo.md).
 GOOD_SCORE = 0.02
+
+
+#: The friction that the last of three or more trainings learns where L = 0 (``--poisson
+#: zero``) and the friction is the default ``neural``: the pairwise exchange
+#: (``structure.ExchangeFriction``), the form of heat conduction among cells, of diffusion and
+#: of reactions. Two trainings of the Cholesky friction that both roll the held-out
+#: trajectories out poorly say that it does not fit these data; the held-out rollouts then
+#: choose between the two forms, as between any two trainings. Eight cells conducting in a
+#: ring: 0.143 -> 0.0658 (one seed of three; the other two keep a default training); a 3 x 3
+#: grid of cells from a new-user check: 0.419 -> 0.0606 (docs/zoo.md, *The last training with
+#: the pairwise exchange*).
+ALTERNATIVE_FRICTION = "exchange"
+
+
+def config_for(config: RunConfig, r: int, repeats: int) -> RunConfig:
+    """Training ``r``'s settings (0 based, of at most ``repeats``): the run's, except that the
+    last of three or more learns :data:`ALTERNATIVE_FRICTION` where L = 0 and the run's
+    friction is ``neural`` beside an entropy."""
+    if (r >= 2 and r == repeats - 1 and config.friction == "neural"
+            and config.poisson == "zero" and option(config.entropy).kind != "zero"):
+        return dataclasses.replace(config, friction=ALTERNATIVE_FRICTION)
+    return config
 
 
 def repeats_for(config: RunConfig, valid: Trajectories | None) -> int:
@@ -106,9 +129,20 @@ class Training:
     budget: float | None
     began: float
     first: GenericModel
+    repeats: int = 1
+
+    def config_of(self, r: int) -> RunConfig:
+        """Training ``r``'s settings (:func:`config_for`)."""
+        return config_for(self.config, r, self.repeats)
+
+    def change_of(self, r: int) -> str:
+        """How training ``r``'s settings differ from the run's, as its flags (``""`` if not)."""
+        config = self.config_of(r)
+        return "" if config is self.config else f"--friction {config.friction}"
 
     def __call__(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
-        config, train, valid = self.config, self.train, self.valid
+        config, train, valid = self.config_of(r), self.train, self.valid
+        loss = self.loss if config is self.config else build_loss(config, self.units, train)
         m_key, f_key = self.keys if r == 0 else tuple(jr.fold_in(k, r) for k in self.keys)
         model = self.first if r == 0 else build_model(
             config, train, key=m_key, units=self.units, constant=self.constant, given=self.given)
@@ -122,11 +156,11 @@ class Training:
 
             model = before_main(model, config, train, valid, units=self.units,
                                 constant=self.constant, given=self.given, dtype=self.dtype,
-                                model_key=m_key, loss=self.loss, key=jr.fold_in(f_key, 1),
+                                model_key=m_key, loss=loss, key=jr.fold_in(f_key, 1),
                                 progress=self.progress, checkpoint=checkpoint,
                                 max_seconds=left_of(self.budget, self.began))
         return fit(
-            with_dtype(model, self.dtype), train, loss=self.loss, validation=valid,
+            with_dtype(model, self.dtype), train, loss=loss, validation=valid,
             max_seconds=left_of(self.budget, self.began), scale=self.units.rate,
             dtype=self.dtype, progress=self.progress,
             checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
@@ -151,6 +185,7 @@ class Outcome:
     seconds: float
     converged: bool = False
     diverged: bool = False
+    change: str = ""
 
     @classmethod
     def of(cls, history: History, seconds: float) -> Outcome:
@@ -177,6 +212,7 @@ class Outcome:
 def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, repeats: int,
                   out: Path, resume: bool, budget: float | None, began: float,
                   keep: Callable[[GenericModel, History], None],
+                  change: Callable[[int], str] = lambda r: "",
                   ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
@@ -186,7 +222,8 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
     history, every training's outcome, the index of the best)``. ``keep(model, history)``
     saves each new best before the next training, so that an interruption never loses it. A
     training that diverges counts as a failed one; where all diverge, the last error is
-    raised."""
+    raised. ``change(r)``: how training ``r``'s settings differ from the run's, as flags
+    (:meth:`Training.change_of`), said when it starts and kept in its outcome."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []
@@ -195,14 +232,14 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
         if r and _enough(best, outcomes[-1], budget, began):
             break
         if r:
-            print(_again_line(r, repeats, best), file=sys.stderr)
+            print(_again_line(r, repeats, best, change(r)), file=sys.stderr)
         start = time.perf_counter()
         try:
             model, history = one(r, resume and left_checkpoint(out, r))
         except TrainingDiverged as e:
             diverged = e
             outcomes.append(Outcome(math.inf, 0, 0, str(e), time.perf_counter() - start,
-                                    diverged=True))
+                                    diverged=True, change=change(r)))
             continue
         except KeyboardInterrupt:
             if best is None:
@@ -211,7 +248,8 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
             # run's; --resume goes on with training r from its stage's checkpoint, if any.
             best[1].stopped = f"interrupted in training {r + 1}"
             break
-        outcome = Outcome.of(history, time.perf_counter() - start)
+        outcome = dataclasses.replace(Outcome.of(history, time.perf_counter() - start),
+                                      change=change(r))
         outcomes.append(outcome)
         if best is None or outcome.rank() < best[2].rank():
             best, chosen = (model, history, outcome), r
@@ -236,7 +274,8 @@ def _enough(best: tuple[Any, History, Outcome] | None, last: Outcome, budget: fl
     return budget is not None and time.perf_counter() - began >= budget
 
 
-def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None) -> str:
+def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
+                change: str = "") -> str:
     if best is None:
         why = "every training so far diverged"
     else:
@@ -245,8 +284,10 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None)
                if o.failures else
                f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
                f"data's spread (good: <= {GOOD_SCORE})")
-    return (f"repeats: {why}; training {r + 1} of at most {repeats} from another "
-            "initialisation (--repeats 1: one training only)")
+    how = (f"with {change} (the form the two before did not fit; the held-out rollouts "
+           "choose)" if change else "from another initialisation")
+    return (f"repeats: {why}; training {r + 1} of at most {repeats} {how} (--repeats 1: one "
+            "training only)")
 
 
 def trainings_note(header: dict) -> str:
@@ -257,7 +298,11 @@ def trainings_note(header: dict) -> str:
         return ""
     scores = ", ".join("diverged" if o.get("diverged") else (
         "not judged" if o.get("score") is None else f"{o['score']:.3g}")
-        + (f" ({o['failures']} failed)" if o.get("failures") else "") for o in trainings)
-    return (f"kept training {header.get('kept_training', 0) + 1} of {len(trainings)} "
+        + (f" ({o['failures']} failed)" if o.get("failures") else "")
+        + (f" [{o['change']}]" if o.get("change") else "") for o in trainings)
+    kept = header.get("kept_training", 0)
+    change = trainings[kept].get("change") if kept < len(trainings) else None
+    return (f"kept training {kept + 1} of {len(trainings)}"
+            + (f", with {change}" if change else "") + " "
             f"(their held-out scores during training: the error over the rollout check's "
             f"windows, in units of the data's spread, not the relative L2 below: {scores})")

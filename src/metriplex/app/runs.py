@@ -26,15 +26,14 @@ from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
-                     residual_metric_of, stopping_for, units_for)
+                     stopping_for, units_for)
 from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
                        train_repeats)
 from ._report import report_figures
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
-from ._stages import starts_for
-from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
-                     scheme_from_name, temperature_weight, validate)
+from ._resume import check_resume, decisions, resume_differences
+from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, pair_spacing
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
@@ -75,37 +74,6 @@ def check_run_folder(out: str | Path, *, overwrite: bool = False, resume: bool =
 def _prepare_dir(out: Path, *, overwrite: bool, resume: bool) -> None:
     check_run_folder(out, overwrite=overwrite, resume=resume)
     out.mkdir(parents=True, exist_ok=True)
-
-
-#: Options a resumed run may change: the wall-time cap (``--max-minutes``), which changes no
-#: step of the training.
-RESUME_MAY_CHANGE = ("max_minutes",)
-
-#: Options whose default is decided from the others: a resume compares what they decide, so a
-#: run saved with the decision spelled out (or made before the option had a default of None)
-#: resumes with the option left out.
-_DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
-            "hold_energy": hold_energy_on, "w_temperature": temperature_weight,
-            "starts": starts_for, "residual_metric": residual_metric_of}
-
-
-def _resume_differences(saved: RunConfig, given: RunConfig) -> str:
-    """The options of ``given`` that differ from those of the interrupted run, as flags."""
-    said = []
-    for k in saved.to_json():
-        if k in RESUME_MAY_CHANGE:
-            continue
-        a, b = (_DECIDED[k](saved), _DECIDED[k](given)) if k in _DECIDED else \
-            (getattr(saved, k), getattr(given, k))
-        if a != b:
-            flag = "--" + k.replace("_", "-")
-            if isinstance(a, bool) and isinstance(b, bool):
-                on, off = flag, "--no-" + flag[2:]
-                said.append(f"it ran with {on if a else off}, this command gives "
-                            f"{on if b else off}")
-            else:
-                said.append(f"{flag} was {a!r}, given {b!r}")
-    return "; ".join(said)
 
 
 def train_run(
@@ -199,39 +167,6 @@ def split_trajectories(data: Trajectories, config: RunConfig, *,
     return data.select(rest), (data.select(valid) if len(valid) else None)
 
 
-def _describe_data(info: dict) -> str:
-    where = f"{info['file']!r}" if info.get("file") else "data"
-    if info.get("dt") is not None:
-        where += f" with --dt {info['dt']!r}"
-    ids = info.get("trajectory_ids") or []
-    rows, n = (info.get("shape") or [None, None])[:2]
-    return (f"{where} ({len(ids)} trajectories, ids {format_ids(ids)}; {rows} rows x {n} "
-            f"variables; sha256 {str(info.get('sha256'))[:12]})")
-
-
-def _check_resume(stored: dict, data_info: dict, train, valid) -> None:
-    """``--resume`` continues only the interrupted run: the same data, the same split."""
-    old = stored.get("data")
-    if isinstance(old, dict) and old.get("sha256") and old.get("sha256") != data_info["sha256"]:
-        raise MetriplexError(
-            f"--resume needs the data of the interrupted run, but they differ: it trained on "
-            f"{_describe_data(old)}; this command gives {_describe_data(data_info)}. Resume "
-            "with the same data file (and the same --dt), or start a new run (--overwrite)."
-        )
-    ids = (sorted(int(i) for i in train.ids),
-           [] if valid is None else sorted(int(i) for i in valid.ids))
-    before = (sorted(stored.get("train_trajectories", ids[0])),
-              sorted(stored.get("validation_trajectories", ids[1])))
-    if before != ids:
-        raise MetriplexError(
-            f"--resume needs the trajectories of the interrupted run, but they differ: it "
-            f"trained on {format_ids(before[0])} and validated on {format_ids(before[1])}; this "
-            f"command trains on {format_ids(ids[0])} and validates on {format_ids(ids[1])}. "
-            "Repeat its --trajectories, --validation-ids or --split, or pass --split RUN_DIR to "
-            "reuse its split."
-        )
-
-
 def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     if config.float64:
         jax.config.update("jax_enable_x64", True)
@@ -247,7 +182,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
             )
         was = dataclasses.replace(RunConfig.from_json(stored), scheme=trained_scheme(saved))
         config = dataclasses.replace(config, scheme=config.scheme or was.scheme)
-        if said := _resume_differences(was, config):
+        if said := resume_differences(was, config):
             raise MetriplexError(
                 f"--resume needs the options of the interrupted run, but they differ: {said}. "
                 "Repeat the original options (config.json in the run folder lists them), or "
@@ -255,7 +190,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
             )
     given_train, valid, data_info, validation_by = parts
     if resume:
-        _check_resume(saved, data_info, given_train, valid)
+        check_resume(saved, data_info, given_train, valid)
     # A resumed run keeps the spacing it trained with (1 in a run from before the choice).
     spacing = config.every or ((saved.get("decided") or {}).get("every", 1) if resume
                                else pair_spacing(given_train))
@@ -277,14 +212,13 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     began = time.perf_counter()
     header_config, config = config.to_json(), dataclasses.replace(config, scheme=scheme)
     loss = build_loss(config, units, train)
-    exact_L, exact_M = exact_blocks(config)
     stopping = stopping_for(config)
     repeats = repeats_for(config, valid)
     header = {
         "config": header_config,
-        # What options left at None/"auto" decided: the run's stages, walls and exact blocks.
-        "decided": {**{k: decide(config) for k, decide in _DECIDED.items()},
-                    "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M,
+        # What options left at None/"auto" decided: the run's stages, walls and exact blocks
+        # (those of the kept training, where another friction was kept: its "friction").
+        "decided": {**decisions(config),
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
                     "repeats": repeats, "every": spacing, "scheme": scheme,
@@ -314,15 +248,20 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
 
     one = Training(config, train, valid, units=units, constant=constant, given=given,
                    dtype=dtype, loss=loss, keys=(model_key, fit_key), out=out,
-                   progress=progress, budget=budget, began=began, first=first)
+                   progress=progress, budget=budget, began=began, first=first, repeats=repeats)
     try:
         model, history, outcomes, chosen = train_repeats(
             one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
-            keep=keep)
+            keep=keep, change=one.change_of)
     except TrainingDiverged as e:
         keep(e.model, e.history)
         raise
     if len(outcomes) > 1:
+        kept = one.config_of(chosen)  # its friction can be another (config_for)
+        if kept is not config:
+            header["decided"] = {**header["decided"], "friction": kept.friction,
+                                 **decisions(kept)}
+            header["loss_terms"] = list(build_loss(kept, units, train).names)
         write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
                                          "kept_training": chosen})
     seconds = time.perf_counter() - began  # every stage and training

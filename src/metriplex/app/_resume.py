@@ -1,0 +1,90 @@
+"""What a resumed run must share with the interrupted one (``metriplex train --resume``): its
+options, where those left at None/"auto" are compared by what they decide, its data and its
+split."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from .._errors import MetriplexError
+from ._build import residual_metric_of
+from ._selection import format_ids
+from ._stages import starts_for
+from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
+                     temperature_weight)
+
+if TYPE_CHECKING:
+    from ..data import Trajectories
+
+#: Options a resumed run may change: the wall-time cap (``--max-minutes``), which changes no
+#: step of the training.
+RESUME_MAY_CHANGE = ("max_minutes",)
+
+#: Options whose default is decided from the others: a resume compares what they decide, so a
+#: run saved with the decision spelled out (or made before the option had a default of None)
+#: resumes with the option left out.
+DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
+           "hold_energy": hold_energy_on, "w_temperature": temperature_weight,
+           "starts": starts_for, "residual_metric": residual_metric_of}
+
+
+def decisions(config: RunConfig) -> dict[str, Any]:
+    """What the options left at None/"auto" decide for ``config``, for config.json's
+    ``decided``: :data:`DECIDED` and the exact blocks."""
+    exact_L, exact_M = exact_blocks(config)
+    return {**{k: decide(config) for k, decide in DECIDED.items()},
+            "exact_poisson_degeneracy": exact_L, "exact_friction_degeneracy": exact_M}
+
+
+def resume_differences(saved: RunConfig, given: RunConfig) -> str:
+    """The options of ``given`` that differ from those of the interrupted run, as flags."""
+    said = []
+    for k in saved.to_json():
+        if k in RESUME_MAY_CHANGE:
+            continue
+        a, b = (DECIDED[k](saved), DECIDED[k](given)) if k in DECIDED else \
+            (getattr(saved, k), getattr(given, k))
+        if a != b:
+            flag = "--" + k.replace("_", "-")
+            if isinstance(a, bool) and isinstance(b, bool):
+                on, off = flag, "--no-" + flag[2:]
+                said.append(f"it ran with {on if a else off}, this command gives "
+                            f"{on if b else off}")
+            else:
+                said.append(f"{flag} was {a!r}, given {b!r}")
+    return "; ".join(said)
+
+
+def describe_data(info: dict) -> str:
+    """The data a run trained on, from config.json's ``data`` (``info``), in a few words."""
+    where = f"{info['file']!r}" if info.get("file") else "data"
+    if info.get("dt") is not None:
+        where += f" with --dt {info['dt']!r}"
+    ids = info.get("trajectory_ids") or []
+    rows, n = (info.get("shape") or [None, None])[:2]
+    return (f"{where} ({len(ids)} trajectories, ids {format_ids(ids)}; {rows} rows x {n} "
+            f"variables; sha256 {str(info.get('sha256'))[:12]})")
+
+
+def check_resume(stored: dict, data_info: dict, train: Trajectories,
+                 valid: Trajectories | None) -> None:
+    """``--resume`` continues only the interrupted run: the same data, the same split."""
+    old = stored.get("data")
+    if isinstance(old, dict) and old.get("sha256") and old.get("sha256") != data_info["sha256"]:
+        raise MetriplexError(
+            f"--resume needs the data of the interrupted run, but they differ: it trained on "
+            f"{describe_data(old)}; this command gives {describe_data(data_info)}. Resume "
+            "with the same data file (and the same --dt), or start a new run (--overwrite)."
+        )
+    ids = (sorted(int(i) for i in train.ids),
+           [] if valid is None else sorted(int(i) for i in valid.ids))
+    before = (sorted(stored.get("train_trajectories", ids[0])),
+              sorted(stored.get("validation_trajectories", ids[1])))
+    if before != ids:
+        raise MetriplexError(
+            f"--resume needs the trajectories of the interrupted run, but they differ: it "
+            f"trained on {format_ids(before[0])} and validated on {format_ids(before[1])}; this "
+            f"command trains on {format_ids(ids[0])} and validates on {format_ids(ids[1])}. "
+            "Repeat its --trajectories, --validation-ids or --split, or pass --split RUN_DIR to "
+            "reuse its split."
+        )
