@@ -172,3 +172,33 @@ def test_one_or_two_training_trajectories_are_noted():
     many = mx.Trajectories(np.repeat(np.arange(3), 50), np.tile(t, 3),
                            np.random.default_rng(0).normal(size=(150, 2)))
     assert not any("training trajector" in n for n in data_notes(many, None, "neural"))
+
+
+def _rotating(angle_of, k=4, n_t=200):
+    """``k`` pendulums turning over the top, their angle stored by ``angle_of(q)``."""
+    t = np.arange(n_t) * 0.1
+    return mx.Trajectories.from_list(
+        [(t, np.c_[angle_of((1.0 + 0.3 * j) * t + 0.5 * j), np.full(n_t, 1.0 + 0.3 * j),
+                   0.01 * t]) for j in range(k)], ("q", "p", "s"))
+
+
+def test_an_angle_stored_modulo_a_turn_is_named_with_the_fix():
+    from metriplex.app._data_checks import sample_warnings, wrapped_angle_warning
+
+    (line,) = wrapped_angle_warning(_rotating(lambda q: np.mod(q, 2.0 * np.pi)))
+    assert "q stays within" in line and "half a turn (2 pi)" in line
+    assert "trajectory 0 at t = 6.3" in line and "numpy.unwrap(q)" in line
+    # In degrees, on (-180, 180], and among the training data's notes.
+    degrees = _rotating(lambda q: np.mod(np.degrees(q) + 180.0, 360.0) - 180.0)
+    assert "half a turn (360)" in wrapped_angle_warning(degrees)[0]
+    assert any("an angle stored modulo a full turn" in x
+               for x in data_notes(degrees, None, "sum:2"))
+    assert "in the evaluated data" in sample_warnings(degrees, "evaluated data")[0]
+    # Unwrapped, nothing; nor where a variable falls from one end of its range to the other
+    # at a stiff start, and goes on falling; nor where it never jumps.
+    assert wrapped_angle_warning(_rotating(lambda q: q)) == []
+    stiff = _rotating(lambda q: 0.2 + 6.0 * np.exp(-30.0 * q))
+    assert np.ptp(stiff.x[:, 0]) > 0.75 * 2.0 * np.pi and np.max(np.abs(np.diff(
+        stiff.x[:20, 0]))) > np.pi  # a turn's range, and a fall of more than half a turn
+    assert wrapped_angle_warning(stiff) == []
+    assert wrapped_angle_warning(_rotating(lambda q: 3.0 * np.sin(q))) == []

@@ -16,9 +16,8 @@ from ..data import noise_level
 from ..verdict import Thresholds
 from ._summary import train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import (against_constant, cells_hint, in_sample_warning, outlier_warning,
-                        structure_warnings, time_unit_warning, trained_on, trained_units,
-                        training_range_warning)
+from ._warnings import (against_constant, cells_hint, in_sample_warning, structure_warnings,
+                        time_unit_warning, trained_on, trained_units, training_range_warning)
 
 if TYPE_CHECKING:
     import argparse
@@ -298,7 +297,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     import json
 
     from ..io import check_output_file, check_output_folder, load, write_json
-    from ._data_checks import check_names
+    from ._data_checks import check_names, sample_warnings
     from .runs import evaluate_run, run_config
 
     if args.out:
@@ -333,7 +332,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     run = run_config(args.run)
     units = run.get("units") or {}
     for line in (time_unit_warning(units, data) + training_range_warning(units, data)
-                 + outlier_warning(data, "evaluated data")):
+                 + sample_warnings(data, "evaluated data")):
         print(line, file=sys.stderr)
     failed, k = metrics.get("rollout_failures", 0), metrics.get("trajectories", 0)
     trained = trained_on(run, data)

@@ -36,7 +36,7 @@ def data_notes(train: Trajectories, valid: Trajectories | None, entropy: str,
     parts = [train] if valid is None else [train, valid]
     return ([data_summary(train, valid)] + few_trajectories_note(train, valid)
             + swapped_axes_warning(parts) + gap_warning(parts) + repeated_column_warning(parts)
-            + outlier_warning(train) + still_validation_warning(train, valid)
+            + sample_warnings(train) + still_validation_warning(train, valid)
             + still_data_warning(parts) + entropy_warnings(parts, entropy)
             + casimir_note(free, train))
 
@@ -132,6 +132,55 @@ def gap_warning(parts: list[Trajectories]) -> list[str]:
             f"step: {listing(found, 4)}. Two recordings under one trajectory id, or lost "
             "samples? Give each recording its own id: the pair across a gap is fitted like any "
             "other."] if found else []
+
+
+#: A full turn of an angle in radians and in degrees.
+TURNS = {"2 pi": 2.0 * np.pi, "360": 360.0}
+
+
+def sample_warnings(data: Trajectories, what: str = "training data") -> list[str]:
+    """The warnings on samples that are not motion: outliers
+    (:func:`._warnings.outlier_warning`) and an angle stored modulo a turn
+    (:func:`wrapped_angle_warning`)."""
+    return outlier_warning(data, what) + wrapped_angle_warning(data, what)
+
+
+def wrapped_angle_warning(data: Trajectories, what: str = "training data") -> list[str]:
+    """A variable that stays within one turn (2 pi, or 360 for degrees) and jumps by more than
+    half a turn in one step, from near one end of its range to near the other, the steps
+    beside the jump going the other way, where its median step is under a twentieth of a turn:
+    an angle stored modulo a turn. Those jumps are
+    not motion (a resolved motion turns less than half a turn a sample), and no smooth field
+    fits the pairs across them."""
+    found = []
+    for j, name in enumerate(data.names):
+        lo, hi = float(np.min(data.x[:, j])), float(np.max(data.x[:, j]))
+        for label, turn in TURNS.items():
+            if not 0.75 * turn <= hi - lo <= turn * (1.0 + 1e-6) or \
+                    np.median(np.abs(np.diff(data.x[:, j]))) >= turn / 20:
+                continue
+            jumps = []
+            for tid, (t, x) in zip(data.ids, data):
+                a, b = x[:-1, j], x[1:, j]
+                wrap = ((np.abs(b - a) > turn / 2) & (np.minimum(a, b) < lo + turn / 4)
+                        & (np.maximum(a, b) > hi - turn / 4))  # one end of the turn to the other
+                # ... and the motion goes on the other way round, as it does across a wrap,
+                # not on the jump's way, as after a stiff fall.
+                sign = np.sign(b - a)
+                near = np.sign(np.c_[np.r_[0.0, b[:-1] - a[:-1]], np.r_[b[1:] - a[1:], 0.0]])
+                wrap &= np.any(near == -sign[:, None], axis=1) & ~np.any(
+                    near == sign[:, None], axis=1)
+                jumps += [f"trajectory {tid} at t = {t[k + 1]:.6g}" for k in np.nonzero(wrap)[0]]
+            if jumps:
+                found.append(f"{name} stays within {lo:.4g} to {hi:.4g} and jumps by more than "
+                             f"half a turn ({label}) in {len(jumps)} step(s) "
+                             f"({listing(jumps, 3)})")
+                break
+    return [f"warning: in the {what}, {'; '.join(found)}: an angle stored modulo a full turn? "
+            "Such a jump is not motion, and no smooth vector field fits the pairs across it "
+            "(a model trained on them is poor everywhere). Unwrap it along each trajectory "
+            "before training (numpy.unwrap(q), or numpy.unwrap(q, period=360) in degrees)."
+            ] if found else []
 
 
 def repeated_column_warning(parts: list[Trajectories]) -> list[str]:
