@@ -61,9 +61,27 @@ def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
             for m, r in ((truth, mx.evaluate(truth, data, scheme=mx.RK4())), (flipped, report))]
     assert same[0]["outcome"] == same[1]["outcome"], [v["statement"] for v in same]
     temps = [r for r in same[1]["reasons"] if r["name"] == "temperatures"][0]
-    assert temps["passed"] is None and "not applicable: with L = 0" in temps["note"]
+    # With L = 0 what is checked is that one state's temperatures share a sign.
+    assert temps["passed"] is True and temps["value"] == 0.0
+    assert "with L = 0 the sign of E is free" in temps["note"]
     assert same[1]["outcome"] == "consistent", same[1]["statement"]
     assert same[1]["statement"].endswith("What the data determine: E is given; S is given.")
+    # Temperatures of both signs in one state are no choice of E's sign (new-user check 14:
+    # "a choice of E's sign, not an error" said of a nine-cell grid where most states had
+    # both): the note says so and the check fails.
+    from metriplex._verdict_checks import _temperature_check
+    from metriplex.verdict import Thresholds
+
+    mixed = eqx.tree_at(lambda m: m.energy, truth, mx.Known(
+        lambda x: truth.energy(x) - 2.0 * truth.energy(x.at[0].set(data.x[0, 0]))))
+    sr = mx.diagnostics.structure_residuals(mixed, data.x)
+    assert sr["temperature_mixed_fraction"] == 1.0 and sr["temperature_negative_fraction"] == 0.5
+    check = _temperature_check(sr, Thresholds(), {})
+    assert check["passed"] is False and "not the energy up to its gauge" in check["note"]
+    as_learned = {**sr, "identified": {**sr["identified"], "learned": ["E", "M"],
+                                       "energy": "function"}}  # the note speaks of a learned E
+    (line,) = [w for w in structure_warnings(as_learned) if w.startswith("note:")]
+    assert "at 100% of the states they have both signs, which no sign of E gives" in line
 
 
 def test_a_learned_entropy_says_its_temperatures_are_not_determined():

@@ -276,6 +276,21 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     assert v_out["outcome"] == CANNOT_TELL, v_out["statement"]
     assert _reasons(v_out)["training_range"]["value"] > 10
     assert "never trained on" in v_out["statement"]
+    # A model trained on far fewer pairs than the reference trains on here (two trajectories
+    # of a new-user check: "NOT consistent" on exactly GENERIC data) gets no answer; as many
+    # keep it, and so does a model trained on these very data (v_in: all of them).
+    pairs = _reasons(v_in)["training_pairs"]
+    assert pairs["passed"] is True and pairs["value"] > 1
+    reference_pairs = mx.Units.from_data(pumped).pairs / pairs["value"]
+    few = dataclasses.replace(mx.Units.from_data(pumped), pairs=int(0.3 * reference_pairs))
+    v_few = verdict(model, pumped, report=report, reference=reference, trained_on=few)
+    assert v_few["outcome"] == CANNOT_TELL, v_few["statement"]
+    assert _reasons(v_few)["training_pairs"]["passed"] is False
+    assert "train on more trajectories" in v_few["statement"]
+    assert mx.Units.from_data(pumped).pairs == len(pumped.t) - len(pumped.ids)
+    older = dataclasses.replace(mx.Units.from_data(pumped), pairs=None)  # a run from before
+    assert "training_pairs" not in _reasons(verdict(model, pumped, report=report,
+                                                    reference=reference, trained_on=older))
     # The same model with a training that did not converge: the evidence is not sound.
     v2 = verdict(model, pumped, report=report, converged=False,
                  stopped="step budget reached (300 steps)", reference=reference)
@@ -595,7 +610,7 @@ def test_a_failed_minimum_is_said_with_the_right_comparison():
 def test_not_consistent_names_only_the_variables_that_carry_the_excess():
     # A run whose entropy s alone the structure could not fit named "s, q, p": every variable
     # of three (found by a new-user check of the verdict).
-    from metriplex._verdict_checks import _worst_variables
+    from metriplex._verdict_outcome import _worst_variables
 
     assert _worst_variables({"q": 1.4e-5, "p": 8.7e-6, "s": 7e-3}) == ["s"]
     assert _worst_variables({"a": 1.0, "b": 0.5, "c": 0.2, "d": 0.05, "e": None}) == [

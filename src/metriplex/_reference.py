@@ -132,7 +132,7 @@ class Reference:
 
 
 def train_reference(data: Trajectories, *, width: int = 64, depth: int = 2, steps: int = 3000,
-                    learning_rate: float = 3e-3, batch_size: int = 256,
+                    learning_rate: float = 1e-2, batch_size: int = 256,
                     validation: float = 0.2, seed: int = 0,
                     dtype: DTypeLike | None = None,
                     progress: bool = False) -> Reference:

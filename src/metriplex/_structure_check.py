@@ -60,7 +60,9 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     energy gradient (:math:`D`: ``scale``, else the states' standard deviations; near 0 the
     energy hardly depends on the entropies, so heat carries little energy: how near is
     physical depends on the system, e.g. 2.6e-4 for a fast-spinning satellite whose damper
-    warms slowly). ``None`` for any other entropy.
+    warms slowly), and ``temperature_mixed_fraction`` the fraction of the states where the
+    :math:`T_i` have both signs (with :math:`L = 0` the sign of E is a gauge, :math:`-E` giving
+    the same flow, but one state's temperatures share it). ``None`` for any other entropy.
 
     ``reversible_share`` is the share of the motion (standardised rates, summed over the
     states) that :math:`L\nabla E` drives, the rest being :math:`M\nabla S`; ``None`` where
@@ -164,7 +166,8 @@ def _temperatures(model: GenericModel, gE: np.ndarray, d: np.ndarray,
                   null_reasons: dict[str, str]) -> dict:
     """The temperature figures of :func:`structure_residuals` from the energy gradients ``gE``
     at the states, ``None`` (with their reason) unless the entropy is a :class:`SumOf`."""
-    keys = ("temperature_negative_fraction", "temperature_min", "temperature_share")
+    keys = ("temperature_negative_fraction", "temperature_min", "temperature_share",
+            "temperature_mixed_fraction")
     if not isinstance(model.entropy, SumOf):
         for k in keys:
             null_reasons[k] = (
@@ -181,7 +184,9 @@ def _temperatures(model: GenericModel, gE: np.ndarray, d: np.ndarray,
         np.linalg.norm(scaled, axis=1), _TINY)
     return {"temperature_negative_fraction": float(np.mean(T < 0.0)),
             "temperature_min": float(np.min(T)),
-            "temperature_share": float(np.median(share))}
+            "temperature_share": float(np.median(share)),
+            "temperature_mixed_fraction": float(np.mean(np.any(T < 0.0, axis=1)
+                                                        & np.any(T > 0.0, axis=1)))}
 
 
 @eqx.filter_jit

@@ -32,7 +32,9 @@ class Units:
     - ``roughness``: how much of the data's rates changes from pair to pair as noise does
       (:func:`~metriplex.data.roughness`; ``None`` where unknown). The verdict compares it with
       the data a model is judged on: a model that learnt from rougher data than those is not
-      refuted by fitting them less well than a field trained on them.
+      refuted by fitting them less well than a field trained on them;
+    - ``pairs``: how many pairs of consecutive samples the data hold (``None`` where unknown),
+      which the verdict compares with the pairs its reference trains on.
 
     In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
     :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
@@ -49,6 +51,7 @@ class Units:
     energy: float = 1.0
     entropy: float = 1.0
     roughness: float | None = None
+    pairs: int | None = None
 
     @classmethod
     def from_data(cls, data: "Trajectories", *, poisson: AbstractPoisson | None = None,
@@ -89,7 +92,8 @@ class Units:
             size = _bivector_size(friction, x, d)
             if size is not None:
                 entropy_scale = 1.0 / (tau * size)
-        return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d))
+        return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d),
+                   int(np.sum(np.maximum(data.lengths() - 1, 0))))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
         """How far the states ``x`` (rows) reach from these units' data: the largest

@@ -23,7 +23,7 @@ CANNOT_TELL = "cannot tell"
 #: The checks whose failure leaves the evidence unsound (cannot tell whatever else fails), and
 #: those that are symptoms of a misfit as much as a lack of evidence (verdict's ``_outcome``).
 _EVIDENCE = {"held_out_pairs", "training_converged", "reference_residual", "training_range",
-             "training_coverage", "training_roughness"}
+             "training_coverage", "training_roughness", "training_pairs"}
 _SYMPTOMS = {"rollout_failures", "step_sensitivity"}
 
 
@@ -250,6 +250,30 @@ def _far_beyond(rel_gen: float | None, rel_box: float | None, th) -> bool:
             and rel_gen > th.far_residual and rel_gen > th.far_ratio * rel_box)
 
 
+def _temperature_check(sr: dict[str, Any], th: Any, why_null: dict[str, str]) -> dict[str, Any]:
+    """``temperatures``: the fraction of the data's (state, entropy variable) pairs with a
+    negative learned temperature; with L = 0, where E's sign is free, of the states whose
+    temperatures have both signs."""
+    cold = sr["temperature_negative_fraction"]
+    if cold is None:
+        return _reason("temperatures", None, th.negative_temperatures, None, CANNOT_TELL,
+                       why_null.get("temperature_negative_fraction", ""))
+    if (sr.get("identified") or {}).get("temperatures") == "ratios":
+        mixed = sr["temperature_mixed_fraction"]
+        return _reason(
+            "temperatures", mixed, th.negative_temperatures, mixed <= th.negative_temperatures,
+            CANNOT_TELL, "with L = 0 the sign of E is free (-E gives the same flow): the "
+            "fraction of the data's states whose temperatures dE/ds_i have both signs, which "
+            "no sign of E gives" + (": there the learned E is not the energy up to its gauge"
+                                    if mixed > th.negative_temperatures else ""))
+    return _reason(
+        "temperatures", cold, th.negative_temperatures, cold <= th.negative_temperatures,
+        CANNOT_TELL, f"fraction of the data's states and entropy variables where the learned "
+        f"temperature dE/ds_i is negative (least {sr['temperature_min']:.3g})"
+        + (": entropy production feeds the motion, which no physical system does"
+           if cold > th.negative_temperatures else ""))
+
+
 def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
                       entropy_free: bool = False) -> list[dict[str, Any]]:
     """Is the fitted model GENERIC? The degeneracy, Jacobi, PSD and antisymmetry checks on
@@ -303,18 +327,7 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
     reasons.append(_reason("poisson_antisymmetry", asym, th.rounding,
                            asym is not None and asym <= th.rounding, CANNOT_TELL,
                            "|L + L^T|/|L| (L must be antisymmetric)"))
-    cold = sr["temperature_negative_fraction"]
-    gauge = (sr.get("identified") or {}).get("temperatures") == "ratios"
-    reasons.append(_reason(
-        "temperatures", cold, th.negative_temperatures,
-        None if cold is None or gauge else cold <= th.negative_temperatures, CANNOT_TELL,
-        why_null.get("temperature_negative_fraction", "") if cold is None else
-        "not applicable: with L = 0 the data fix E only up to a function of itself, so the "
-        "temperatures' sign is not determined (-E gives the same flow)" if gauge else
-        f"fraction of the data's states and entropy variables where the learned temperature "
-        f"dE/ds_i is negative (least {sr['temperature_min']:.3g})"
-        + (": entropy production feeds the motion, which no physical system does"
-           if cold > th.negative_temperatures else "")))
+    reasons.append(_temperature_check(sr, th, why_null))
     share = sr.get("reversible_share")
     reasons.append(_reason(
         "reversible_share", share, th.reversible_share,
@@ -352,37 +365,6 @@ def _reversible_only(sr: dict[str, Any], entropy_free: bool) -> bool:
 #: The structure checks on S and M, which a friction that never acts makes moot.
 _ENTROPY_AND_FRICTION = ("degeneracy_L_gradS", "degeneracy_M_gradE", "entropy_production",
                          "temperatures")
-
-
-def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:
-    """The variables whose excess residual (the structured model's over the reference's) is
-    at least a tenth of the largest, the largest first, at most three: those that the
-    structure cannot fit (all three of three named before, the one to blame among them)."""
-    if not excess:
-        return []
-    ranked = sorted(((v, n) for n, v in excess.items() if v is not None and v > 0),
-                    reverse=True)
-    return [n for v, n in ranked[:3] if v >= 0.1 * ranked[0][0]]
-
-
-def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None) -> list[str]:
-    """What a "not consistent" adds: the laws the observed data break under the learned E and
-    S (``observed``: :func:`~metriplex._reference._observed_laws`) and the variables the
-    structure cannot fit (``excess``: each one's excess residual)."""
-    laws = []
-    rate = observed["energy_rate_relative_median"]
-    if rate is not None and rate > 0.05:
-        laws.append(f"first law: the observed flow changes the learned energy (median "
-                    f"|dE/dt| = {rate:.2g} of its largest possible rate)")
-    falls = observed["entropy_decreasing_fraction"]
-    if falls is not None and falls > 0.1:
-        laws.append(f"second law: on {100 * falls:.0f}% of the observed pairs the learned "
-                    "entropy decreases")
-    worst = _worst_variables(excess)
-    if worst:
-        laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
-                    f"{', '.join(worst)}")
-    return laws
 
 
 @in_full_precision

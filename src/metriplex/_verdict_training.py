@@ -21,15 +21,40 @@ if TYPE_CHECKING:
     from .data import Trajectories
 
 
-def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool,
-                     th) -> list[dict[str, Any]]:
-    """The ``training_range`` and ``training_roughness`` entries (none without
-    ``trained_on``); ``misfit``: the residual ratio failed."""
+def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool, th,
+                     reference_pairs: int | None = None) -> list[dict[str, Any]]:
+    """The ``training_range``, ``training_coverage``, ``training_roughness`` and
+    ``training_pairs`` entries (none without ``trained_on``); ``misfit``: the residual ratio
+    failed; ``reference_pairs``: the pairs the reference trained on."""
     if trained_on is None:
         return []
     return _range_check(data, trained_on, th) + _coverage_check(
         data, trained_on, ratio_failed=misfit, th=th) + _roughness_check(
-        data, trained_on, rel_gen, ratio_failed=misfit, th=th)
+        data, trained_on, rel_gen, ratio_failed=misfit, th=th) + _pairs_check(
+        trained_on, reference_pairs, ratio_failed=misfit, th=th)
+
+
+def _pairs_check(trained_on, reference_pairs: int | None, *, ratio_failed: bool,
+                 th) -> list[dict[str, Any]]:
+    """``training_pairs``, where the model's training pairs are known (``trained_on.pairs``):
+    their number against the ``reference_pairs`` that the reference trained on, from these
+    data. A model fitted to two trajectories, judged beside a field fitted to six of the data
+    it is judged on, fits them worse whatever its structure (new-user check 14: exactly
+    GENERIC data called not consistent). Judged only where the residual ratio failed."""
+    if trained_on.pairs is None or not reference_pairs:
+        return []
+    value = trained_on.pairs / reference_pairs
+    if not ratio_failed:
+        passed, note = None, "not judged: the residual ratio passes"
+    else:
+        passed = value >= th.training_pairs
+        note = (f"the model trained on {trained_on.pairs} pairs of samples, the reference on "
+                f"{reference_pairs} pairs of these data" + ("" if passed else
+                ": a structured model fitted to far fewer data than the field it is compared "
+                "with need not fit as well, whatever its structure, so its worse fit is no "
+                "evidence against GENERIC; train on more trajectories (or on these data) to "
+                "decide"))
+    return [_reason("training_pairs", value, th.training_pairs, passed, CANNOT_TELL, note)]
 
 
 #: How far from the training data's mean, in their standard deviations, a state counts as

@@ -63,6 +63,9 @@ name                       limit          meaning
                                           extrapolates (cannot tell)
 ``training_coverage``      0.05           failed residual ratio, ``trained_on``: over 5% of
                                           the states beyond 3 of those (cannot tell)
+``training_pairs``         0.5 (least)    failed residual ratio, ``trained_on``: the model
+                                          trained on under half the pairs that the
+                                          reference trains on here (cannot tell)
 ``reference_residual``     0.3            the black box leaves more than 30% of the held-out
                                           rates (9% of their power) unexplained: too few
                                           trajectories to generalise from, noise, a coarse
@@ -126,9 +129,10 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           :math:`\partial E/\partial s_i` is negative:
                                           entropy production then feeds the motion, which
                                           no physical system does (cannot tell; ``passed``
-                                          is ``None`` for any other entropy, and where
-                                          L = 0: E is then fixed only up to a function
-                                          of itself, and -E gives the same flow)
+                                          is ``None`` for any other entropy). Where L = 0,
+                                          E is fixed only up to a function of itself and
+                                          -E gives the same flow: then the fraction of the
+                                          states whose temperatures have both signs
 ``reversible_share``       0.01 (least)   the share of the standardised motion at the
                                           data's states that :math:`L\nabla E` drives;
                                           below it friction carries the motion, which any
@@ -146,7 +150,8 @@ A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
 Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
-``training_coverage``, ``training_roughness`` or ``reference_residual`` → **cannot tell**;
+``training_coverage``, ``training_roughness``, ``training_pairs`` or ``reference_residual``
+→ **cannot tell**;
 else a failed ``residual_ratio`` → **not consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
 :func:`~metriplex._verdict_checks._far_beyond`); else any failed check → **cannot tell**;
@@ -176,9 +181,9 @@ from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _res
 # The checks (each a ``reasons`` entry) and the outcome names, public from here.
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISSING_VARIABLE,
                               NOT_CONSISTENT, NOT_POISSON, REVERSIBLE_ONLY, UNIDENTIFIED_SPLIT,
-                              _EVIDENCE, _SPLIT_CHECKS, _SYMPTOMS, _residual_checks,
-                              _reversible_only, _said, _soundness_checks, _structure_checks,
-                              _violations, _far_beyond)
+                              _SPLIT_CHECKS, _far_beyond, _residual_checks, _reversible_only,
+                              _said, _soundness_checks, _structure_checks)
+from ._verdict_outcome import _outcome, _violations
 from ._verdict_skill import _skill_check
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
@@ -224,31 +229,9 @@ class Thresholds:
     step_sensitivity: float = 0.1
     training_range: float = 6.0
     training_coverage: float = 0.05
+    training_pairs: float = 0.5
     training_roughness: float = 2.0
     rollout_skill: float = 1.0
-
-
-def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
-             far: bool) -> str:
-    """The verdict's outcome from its ``failed`` checks (module docstring, *Outcome*); ``far``:
-    the structured model's residual is far beyond the reference's (``_far_beyond``)."""
-    # reference_residual_correlation only weakens a "consistent" (below, with the structure
-    # checks): a structured model that leaves much more than the reference is not consistent.
-    # Failed rollouts and a step-dependent prediction make a "consistent" unsound, but beside
-    # a converged training's residual far beyond the reference's (_far_beyond) they are
-    # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
-    # conservative: ratio 37, "cannot tell" before).
-    misfit = any(r["name"] == "residual_ratio" for r in failed)
-    if any(r["name"] in _EVIDENCE for r in failed) or (ratio is None):
-        outcome = CANNOT_TELL
-    elif misfit and ((converged is True and far)
-                     or not any(r["name"] in _SYMPTOMS for r in failed)):
-        outcome = NOT_CONSISTENT
-    elif failed:
-        outcome = CANNOT_TELL
-    else:
-        outcome = CONSISTENT
-    return outcome
 
 
 def verdict(
@@ -264,7 +247,7 @@ def verdict(
     width: int = 64,
     depth: int = 2,
     steps: int = 3000,
-    learning_rate: float = 3e-3,
+    learning_rate: float = 1e-2,
     batch_size: int = 256,
     thresholds: Thresholds = Thresholds(),
     validation: float = 0.2,
@@ -281,8 +264,10 @@ def verdict(
     :class:`~metriplex.train.History` that :func:`~metriplex.fit` returned) to read them from;
     unknown when none is given (a ground-truth model), and a "consistent" then says so.
     ``reference``: a :func:`train_reference` of ``data`` to reuse; otherwise the black box
-    trains here (``width``, ``depth``, ``steps``, ``learning_rate``, ``batch_size``) on
-    ``1 - validation`` of the trajectories. Both models are scored on the rest.
+    trains here (``width``, ``depth``, ``steps``, ``learning_rate``, ``batch_size``; their
+    defaults are those of ``metriplex train``, which ``metriplex evaluate`` passes from the
+    run, so that both give the same figures) on ``1 - validation`` of the trajectories. Both
+    models are scored on the rest.
     ``trained_on``: the units of the model's training data (``Units.from_data``; a run's
     ``config.json`` keeps them), to check that ``data`` stay where the model was trained.
 
@@ -333,7 +318,8 @@ def verdict(
                                 fraction=reference.validation) + _skill_check(report, th)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
     reasons += compared + _training_checks(data, trained_on, rel_gen, th=th, misfit=any(
-        r["name"] == "residual_ratio" and r["passed"] is False for r in compared))
+        r["name"] == "residual_ratio" and r["passed"] is False for r in compared),
+        reference_pairs=len(train.t) - len(train.ids))
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     entropy_free = bool(weights(model.entropy)) or isinstance(model.entropy, ZeroPotential)
     reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)

@@ -363,7 +363,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
         metrics["verdict"] = verdict(
             model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],
             width=cfg.get("width", 64), depth=cfg.get("depth", 2),
-            steps=args.verdict_steps, learning_rate=cfg.get("lr", 3e-3),
+            steps=args.verdict_steps, learning_rate=cfg.get("lr", 1e-2),
             batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
             trained_on=trained_units(units),
         )

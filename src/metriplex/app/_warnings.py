@@ -48,11 +48,22 @@ def identified_note(metrics: dict) -> list[str]:
     if not (("E" in ident.get("learned", ()) and ident.get("energy") != "constant")
             or ident.get("entropy") == "function"):
         return []
-    negative = metrics.get("temperature_negative_fraction")
-    sign = (f" The learned temperatures are negative at {negative:.0%} of the states: with "
-            "L = 0 that is a choice of E's sign, not an error."
-            if ident.get("temperatures") == "ratios" and negative else "")
+    negative, mixed = (metrics.get(k) for k in ("temperature_negative_fraction",
+                                                 "temperature_mixed_fraction"))
+    sign = ""
+    if ident.get("temperatures") == "ratios" and negative:
+        sign = f" The learned temperatures are negative at {_share(negative)} of the states: " + (
+            f"with L = 0 E's sign is free, but at {_share(mixed)} of the states they have both "
+            "signs, which no sign of E gives: there this E is not the energy up to its gauge."
+            if mixed and mixed > NEGATIVE_TEMPERATURES else
+            "with L = 0 that is a choice of E's sign, not an error.")
     return [f"note: {ident['statement']}{sign} See the README, What the data determine."]
+
+
+def _share(fraction: float) -> str:
+    """A fraction as a percentage, with two significant digits under 1 %, never "0%" for a
+    fraction that is not zero."""
+    return f"{fraction:.0%}" if fraction >= 0.01 or fraction == 0 else f"{100 * fraction:.2g}%"
 
 
 def temperature_warnings(metrics: dict) -> list[str]:

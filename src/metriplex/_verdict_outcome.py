@@ -1,0 +1,63 @@
+"""The verdict's outcome from its failed checks (:mod:`metriplex.verdict`, *Outcome*), and
+what a "not consistent" adds: the laws the observed data break and the variables to blame."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _EVIDENCE,
+                              _SYMPTOMS)
+
+
+def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
+             far: bool) -> str:
+    """The verdict's outcome from its ``failed`` checks (:mod:`metriplex.verdict`, *Outcome*); ``far``:
+    the structured model's residual is far beyond the reference's (``_far_beyond``)."""
+    # reference_residual_correlation only weakens a "consistent" (below, with the structure
+    # checks): a structured model that leaves much more than the reference is not consistent.
+    # Failed rollouts and a step-dependent prediction make a "consistent" unsound, but beside
+    # a converged training's residual far beyond the reference's (_far_beyond) they are
+    # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
+    # conservative: ratio 37, "cannot tell" before).
+    misfit = any(r["name"] == "residual_ratio" for r in failed)
+    if any(r["name"] in _EVIDENCE for r in failed) or (ratio is None):
+        outcome = CANNOT_TELL
+    elif misfit and ((converged is True and far)
+                     or not any(r["name"] in _SYMPTOMS for r in failed)):
+        outcome = NOT_CONSISTENT
+    elif failed:
+        outcome = CANNOT_TELL
+    else:
+        outcome = CONSISTENT
+    return outcome
+
+
+def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:
+    """The variables whose excess residual (the structured model's over the reference's) is
+    at least a tenth of the largest, the largest first, at most three: those that the
+    structure cannot fit (all three of three named before, the one to blame among them)."""
+    if not excess:
+        return []
+    ranked = sorted(((v, n) for n, v in excess.items() if v is not None and v > 0),
+                    reverse=True)
+    return [n for v, n in ranked[:3] if v >= 0.1 * ranked[0][0]]
+
+
+def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None) -> list[str]:
+    """What a "not consistent" adds: the laws the observed data break under the learned E and
+    S (``observed``: :func:`~metriplex._reference._observed_laws`) and the variables the
+    structure cannot fit (``excess``: each one's excess residual)."""
+    laws = []
+    rate = observed["energy_rate_relative_median"]
+    if rate is not None and rate > 0.05:
+        laws.append(f"first law: the observed flow changes the learned energy (median "
+                    f"|dE/dt| = {rate:.2g} of its largest possible rate)")
+    falls = observed["entropy_decreasing_fraction"]
+    if falls is not None and falls > 0.1:
+        laws.append(f"second law: on {100 * falls:.0f}% of the observed pairs the learned "
+                    "entropy decreases")
+    worst = _worst_variables(excess)
+    if worst:
+        laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
+                    f"{', '.join(worst)}")
+    return laws
