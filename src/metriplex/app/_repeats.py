@@ -284,7 +284,7 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
                if o.failures else
                f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
                f"data's spread (good: <= {GOOD_SCORE})")
-    how = (f"with {change} (the form the two before did not fit; the held-out rollouts "
+    how = (f"with {change} (the form the {r} before did not fit; the held-out rollouts "
            "choose)" if change else "from another initialisation")
     return (f"repeats: {why}; training {r + 1} of at most {repeats} {how} (--repeats 1: one "
             "training only)")
