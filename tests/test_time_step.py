@@ -162,6 +162,13 @@ def test_dt_never_silently_replaces_times_that_the_file_has(tmp_path):
     np.savez(tmp_path / "f32.npz", trajectory=np.zeros(many, int), x=np.zeros((many, 1)),
              t=(np.arange(many) * np.float32(1e-3)).astype(np.float32))
     assert mx.read(tmp_path / "f32.npz", dt=1e-3).t[-1] == pytest.approx(19.999)
+    # A float64 clock far from zero with one sample missing (a new-user check's lab file, times
+    # near 1.7e9 s, whose gap float32's rounding of 128 s hid): refused, naming the gap.
+    clock = 1.7e9 + 0.05 * np.delete(np.arange(T + 1), 7)
+    mx.write(tmp_path / "clock.csv", mx.Trajectories(np.zeros(T, int), clock, x[:T], ("q", "p")))
+    with pytest.raises(MetriplexError, match=r"--dt 0\.05 would replace the file's own times, "
+                       r"whose steps are 0\.05 to 0\.1"):
+        mx.read(tmp_path / "clock.csv", dt=0.05)
     result = run("train", tmp_path / "d.csv", "--out", tmp_path / "run", "--dt", "0.2",
                  "--steps", "1")
     assert result.returncode == 2 and "would replace the file's own times" in result.stderr

@@ -107,10 +107,14 @@ def _check_own_steps(own: Trajectories, dt: float) -> None:
     """Refuse ``dt`` for data whose own times have another step: ``dt`` is for files without
     usable times, and replacing correct ones by a wrong step would train a model of other
     dynamics without a word. Every step is compared: equal to ``dt`` within 0.1 %, or within
-    the rounding of times stored in float32 (which wobble step by step), is no contradiction."""
+    the rounding of the times as stored (float32 times wobble step by step), is no
+    contradiction. Times are taken as float32 only where every one of them is a float32
+    number: on a float64 clock near 1.7e9 s, float32's rounding (128 s) would hide any gap."""
     same = own.trajectory[1:] == own.trajectory[:-1]
     steps = np.diff(own.t)[same]
-    rounding = 8 * np.finfo(np.float32).eps * np.abs(own.t[1:][same])
+    t = np.asarray(own.t, dtype=np.float64)
+    stored = np.float32 if np.array_equal(t, t.astype(np.float32)) else np.float64
+    rounding = 8 * np.finfo(stored).eps * np.abs(t[1:][same])
     if len(steps) and np.any(np.abs(steps - dt) > np.maximum(1e-3 * dt, rounding)):
         lo, hi = float(np.min(steps)), float(np.max(steps))
         found = f"{lo:.6g}" if hi - lo <= 1e-3 * abs(hi) else f"{lo:.6g} to {hi:.6g}"
