@@ -18,7 +18,7 @@ def _history(score, *, failures=0, converged=True, stopped="converged at step 10
                    best_rollout_failures=failures, converged=converged, stopped=stopped)
 
 
-def _run(results, tmp_path, repeats=3, budget=None):
+def _run(results, tmp_path, repeats=3, budget=None, began=0.0):
     """train_repeats over fake trainings: each entry of ``results`` a History, an exception
     to raise, or a callable of the call count."""
     calls, kept = [], []
@@ -31,7 +31,7 @@ def _run(results, tmp_path, repeats=3, budget=None):
         return f"model {r}", got
 
     model, history, outcomes, chosen = _repeats.train_repeats(
-        one, repeats=repeats, out=tmp_path, resume=False, budget=budget, began=0.0,
+        one, repeats=repeats, out=tmp_path, resume=False, budget=budget, began=began,
         keep=lambda m, h: kept.append(m))
     return model, history, outcomes, chosen, calls, kept
 
@@ -221,3 +221,27 @@ def test_a_run_that_keeps_the_exchange_records_it_and_its_model_has_it(tmp_path,
     assert header["decided"]["exact_friction_degeneracy"] is True
     assert header["loss_terms"] == ["residual"]  # no penalty where M grad E = 0 is exact
     assert isinstance(mx.load(out).friction, mx.structure.ExchangeFriction)
+
+
+def test_a_resumed_run_counts_the_time_its_interrupted_run_spent(tmp_path):
+    # --max-minutes caps the whole run: a new-user check resumed a run capped at 3 minutes with
+    # --max-minutes 4 and got 261 s more, two trainings from scratch, after being told that
+    # the budget counts the time already trained.
+    import time
+
+    from metriplex.app._resume import checkpoint_seconds, spent_seconds
+    from metriplex.io import save
+
+    assert spent_seconds(tmp_path) == 0.0 and checkpoint_seconds(tmp_path / "none.ckpt") == 0.0
+    model = mx.GenericModel(mx.SumOf((0,)), mx.ZeroPotential(), mx.CanonicalPoisson(2, 1),
+                            mx.ZeroFriction(2))
+    save(tmp_path / "model.mpx", model, n=2, extra={"train_seconds": 185.5})
+    assert spent_seconds(tmp_path) == 185.5
+    # A checkpoint's training time is read from its header line alone.
+    (tmp_path / "c.ckpt").write_bytes(b"METRIPLEX-CHECKPOINT\n" + json.dumps(
+        {"history": {"time": [1.0, 2.5, 61.25]}}).encode() + b"\n" + b"\0" * 8)
+    assert checkpoint_seconds(tmp_path / "c.ckpt") == 61.25
+    # A run whose earlier part spent the budget starts no other training after the first.
+    *_, calls, _ = _run([_history(0.9), _history(0.001)], tmp_path, budget=240.0,
+                        began=time.perf_counter() - 250.0)
+    assert len(calls) == 1

@@ -28,6 +28,7 @@ from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
 from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
 from ._option import option
+from ._resume import checkpoint_seconds
 from ._stages import before_main, left_of
 from .config import RunConfig
 
@@ -159,9 +160,14 @@ class Training:
                                 model_key=m_key, loss=loss, key=jr.fold_in(f_key, 1),
                                 progress=self.progress, checkpoint=checkpoint,
                                 max_seconds=left_of(self.budget, self.began))
+        # fit counts a resumed training's own time so far against its cap: add it to what is
+        # left of the run's budget, which counts it already.
+        left = left_of(self.budget, self.began)
+        if left is not None and main:
+            left += checkpoint_seconds(checkpoint_path(self.out, r))
         return fit(
             with_dtype(model, self.dtype), train, loss=loss, validation=valid,
-            max_seconds=left_of(self.budget, self.began), scale=self.units.rate,
+            max_seconds=left, scale=self.units.rate,
             dtype=self.dtype, progress=self.progress,
             checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
                                   resume=main),

@@ -4,6 +4,8 @@ split."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._errors import MetriplexError
@@ -88,3 +90,30 @@ def check_resume(stored: dict, data_info: dict, train: Trajectories,
             "Repeat its --trajectories, --validation-ids or --split, or pass --split RUN_DIR to "
             "reuse its split."
         )
+
+
+def spent_seconds(out: Path) -> float:
+    """The seconds that the interrupted run in ``out`` spent (its ``model.mpx``'s
+    ``train_seconds``, written when it stopped: every stage and training, and those of the
+    runs it resumed), so that ``--max-minutes`` caps the whole run; 0 where unknown (a run
+    killed before it could write it)."""
+    from ..io import read_header
+
+    try:
+        seconds = float(read_header(out / "model.mpx").get("extra", {}).get("train_seconds", 0))
+    except (OSError, ValueError, TypeError, MetriplexError):
+        return 0.0
+    return seconds if seconds > 0 else 0.0
+
+
+def checkpoint_seconds(path: Path) -> float:
+    """The training time that a checkpoint's history holds (the last of its ``time``), 0 where
+    there is none or it cannot be read: what a resumed :func:`~metriplex.fit` counts against its
+    ``max_seconds`` before it trains on."""
+    try:
+        with open(path, "rb") as f:
+            f.readline()  # the magic line
+            times = json.loads(f.readline())["history"]["time"]
+        return float(times[-1]) if times else 0.0
+    except (OSError, ValueError, KeyError, TypeError, IndexError):
+        return 0.0

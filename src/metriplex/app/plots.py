@@ -373,9 +373,9 @@ def gauge_fit(true_vals: ArrayLike, learned_vals: ArrayLike, *, label: str,
     a, b = np.polyfit(true_vals, learned_vals, 1)
     ax.plot(true_vals, learned_vals, ".", ms=2, color="C0", alpha=0.5)
     lo, hi = float(np.min(true_vals)), float(np.max(true_vals))
-    ax.plot([lo, hi], [a * lo + b, a * hi + b], "k--", lw=1, label=f"fit {a:.3g}·{label}+{b:.3g}")
-    ax.set_xlabel(f"true {label}")
-    ax.set_ylabel(f"learned {label}")
+    ax.plot([lo, hi], [a * lo + b, a * hi + b], "k--", lw=1,
+            label=f"fit {a:.3g}·{label} {'+' if b >= 0 else '−'} {abs(b):.3g}")
+    ax.set(xlabel=f"true {label}", ylabel=f"learned {label}")
     ax.legend(fontsize=8)
     ax.set_title(f"learned vs true {label}")
     return fig

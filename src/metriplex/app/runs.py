@@ -32,7 +32,7 @@ from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repe
 from ._report import report_figures
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
-from ._resume import check_resume, decisions, resume_differences
+from ._resume import check_resume, decisions, resume_differences, spent_seconds
 from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, pair_spacing
 from ..diagnostics import evaluate, rollout_data
@@ -209,7 +209,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                      given_train, spacing, config.every)) + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
-    began = time.perf_counter()
+    # --max-minutes caps the whole run: a resumed one counts what the interrupted one spent.
+    began = time.perf_counter() - (spent_seconds(out) if resume else 0.0)
     header_config, config = config.to_json(), dataclasses.replace(config, scheme=scheme)
     loss = build_loss(config, units, train)
     stopping = stopping_for(config)

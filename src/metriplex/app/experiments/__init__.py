@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import plots
 from ..._errors import MetriplexError
-from ..._model import with_dtype
+from ..._model import weights, with_dtype
 from .._presets import EXPERIMENTS, Experiment, Size
 from ..config import PRESETS, RunConfig, preset, scheme_from_name
 
@@ -178,6 +178,11 @@ def run_experiment(
           f"{_fmt(truth[key])}), learned-energy drift "
           f"{_fmt(metrics['energy_relative_drift_gauge_fixed'])} (gauge-fixed), training "
           f"{seconds:.0f} s -> {out}")
+    fit = metrics["energy_gauge_fit"]
+    given_L = not weights(model.poisson)  # then E is fixed up to a constant: slope 1
+    print(f"  learned E against the true E along the test data: slope {fit['slope']:.3g}"
+          f"{' (1 for the exact E: L is given)' if given_L else ''}, r^2 {fit['r2']:.3g}"
+          " (figures/energy_fit.png)")
     if quick:
         print("  (the accuracy bars are for full runs; a --quick run only has to beat the "
               "untrained model by a wide margin)")
