@@ -52,8 +52,14 @@ def test_the_lattice_bonds_neighbouring_cells(periodic):
 
 
 def test_the_lattice_refuses_what_does_not_fit():
-    with pytest.raises(mx.MetriplexError, match="multiple of 5.*n=12"):
+    with pytest.raises(mx.MetriplexError, match="multiple of 5.*n=12.*allows: 2, 3, 4, 6"):
         Lattice(5, 12)
+    # A chain of nine masses heating one shared bath (n = 19, a new-user check) is no lattice:
+    # no one-variable "cells" proposed (trained with them, 0.789 against the defaults' 0.103).
+    with pytest.raises(mx.MetriplexError, match=r"n=19\. A state with variables of its own "
+                       r"beside the cells \(one bath") as refused:
+        Lattice(9, 19)
+    assert "local:19" not in str(refused.value)
     with pytest.raises(mx.MetriplexError, match="cells"):
         Lattice(1, 12)
 

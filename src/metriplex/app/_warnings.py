@@ -182,7 +182,8 @@ def cells_hint(metrics: dict, config: Any, n: int) -> list[str]:
             or str(config.energy).startswith("local") or str(config.friction) != "neural"):
         return []
     return [f"hint: {n} variables and a held-out error of {error:.2g}: if the state is made of "
-            "alike cells (a chain or a lattice, each cell's fields stored field by field), "
+            "alike cells and nothing else (a chain or a lattice, each cell's fields stored "
+            "field by field; not one bath shared by every cell), "
             "--energy local:CELLS --friction local:CELLS learns it as sums over neighbouring "
             "cells (docs/structure.md, States made of cells; on a chain of 6 masses with "
             "their baths, 0.38 with the default blocks, 0.067 with these, in 3 minutes). A "

@@ -61,11 +61,15 @@ class Lattice:
         expect_integer(self.cells, what="a lattice's cells", least=2,
                        fix="Example: --energy local:10 for ten cells.")
         if self.n % self.cells:
+            counts = [k for k in range(2, self.n // 2 + 1) if self.n % k == 0]
             raise MetriplexError(
                 f"a lattice of {self.cells} cells needs a number of variables that is a "
                 f"multiple of {self.cells} (the same fields in every cell, stored field by "
-                f"field); the data have n={self.n}. Give the number of cells: e.g. local:"
-                f"{self.n // 3 if self.n % 3 == 0 else self.n} for this n.")
+                f"field, and no variable outside the cells); the data have n={self.n}. "
+                + (f"The cell counts this n allows: {', '.join(map(str, counts))}. " if counts
+                   else "") + "A state with variables of its own beside the cells (one bath "
+                "that every cell heats, a recorded parameter) is no lattice: leave the local "
+                "blocks out for it.")
 
     @property
     def fields(self) -> int:
