@@ -36,6 +36,12 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
                 hint = (f" Its columns are separated by {'a tab' if sep == chr(9) else repr(sep)}"
                         ": metriplex reads comma-separated files with decimal points (pandas: "
                         "df.to_csv(path, index=False)).")
+            elif len(header) >= 3 and not hint and header[0].split(" ")[0] in ("t", "time"):
+                hint = (f" Its first column is {header[0]!r} and there is no trajectory column: "
+                        "a wide table (one time column, each trajectory's variables beside it) "
+                        "is not read; write the long table, one row per sample: its trajectory "
+                        "id, its time, its state (pandas: melt or stack the trajectories into "
+                        "rows; or save a .npz with x of shape (K, T, n) and t).")
             elif len(header) >= 3 and not hint:
                 hint = (f" The first two columns are {header[0]!r} and {header[1]!r}: name them "
                         "`trajectory` (integer ids) and `t` (numbers), and leave out an index "
