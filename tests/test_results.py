@@ -63,6 +63,10 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
     assert "--steps" not in timed and "allow more time (--max-minutes)" in timed
     assert "(15.2 s: what the first stage left of --max-minutes) at step 3000" in timed
     assert "never trained" not in timed
+    # An interrupted training wants --resume, not more steps (new-user check 15).
+    cut = train_summary(_history(3000, 3000, False, "interrupted at step 3000"), metrics, 5.0,
+                        Path("run"))
+    assert "not converged, continue it with --resume" in cut and "--steps" not in cut
     # A first stage that took the whole budget left the main stage (the friction) untrained.
     spent = train_summary(History(step=[0], best_step=0, converged=False,
                                   stopped="time budget reached (1 s) at step 0"),

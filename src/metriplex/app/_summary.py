@@ -36,8 +36,9 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
             ended += ("; the first stage took the whole budget, so the main stage (the "
                       "friction with it) never trained: allow more time (--max-minutes)")
     if not history.converged and history.best_step == last and last > 0:
-        ended += ("; the best model is the last one: not converged, allow more "
-                  + ("time (--max-minutes)" if timed else "--steps"))
+        ended += ("; the best model is the last one: not converged, " + (
+            "continue it with --resume" if ended.startswith("interrupted") else "allow more "
+            + ("time (--max-minutes)" if timed else "--steps")))
     # Where --repeats trained from other initialisations already, another --seed is no advice.
     reseed = "other initialisations did no better" if trainings else "try another --seed"
     if history.best_step == 0 and last > 0:
