@@ -93,7 +93,7 @@ class Units:
             if size is not None:
                 entropy_scale = 1.0 / (tau * size)
         return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d),
-                   int(np.sum(np.maximum(data.lengths() - 1, 0))))
+                   len(data.t) - len(data.ids))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
         """How far the states ``x`` (rows) reach from these units' data: the largest

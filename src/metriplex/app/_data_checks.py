@@ -149,27 +149,26 @@ def wrapped_angle_warning(data: Trajectories, what: str = "training data") -> li
     """A variable that stays within one turn (2 pi, or 360 for degrees) and jumps by more than
     half a turn in one step, from near one end of its range to near the other, the steps
     beside the jump going the other way, where its median step is under a twentieth of a turn:
-    an angle stored modulo a turn. Those jumps are
-    not motion (a resolved motion turns less than half a turn a sample), and no smooth field
-    fits the pairs across them."""
+    an angle stored modulo a turn. Those jumps are not motion (a resolved motion turns less
+    than half a turn a sample), and no smooth field fits the pairs across them."""
     found = []
     for j, name in enumerate(data.names):
         lo, hi = float(np.min(data.x[:, j])), float(np.max(data.x[:, j]))
+        median_step = float(np.median(np.abs(np.diff(data.x[:, j]))))
         for label, turn in TURNS.items():
-            if not 0.75 * turn <= hi - lo <= turn * (1.0 + 1e-6) or \
-                    np.median(np.abs(np.diff(data.x[:, j]))) >= turn / 20:
+            if not 0.75 * turn <= hi - lo <= turn * (1.0 + 1e-6) or median_step >= turn / 20:
                 continue
             jumps = []
             for tid, (t, x) in zip(data.ids, data):
                 a, b = x[:-1, j], x[1:, j]
-                wrap = ((np.abs(b - a) > turn / 2) & (np.minimum(a, b) < lo + turn / 4)
+                d = b - a
+                wrap = ((np.abs(d) > turn / 2) & (np.minimum(a, b) < lo + turn / 4)
                         & (np.maximum(a, b) > hi - turn / 4))  # one end of the turn to the other
                 # ... and the motion goes on the other way round, as it does across a wrap,
                 # not on the jump's way, as after a stiff fall.
-                sign = np.sign(b - a)
-                near = np.sign(np.c_[np.r_[0.0, b[:-1] - a[:-1]], np.r_[b[1:] - a[1:], 0.0]])
-                wrap &= np.any(near == -sign[:, None], axis=1) & ~np.any(
-                    near == sign[:, None], axis=1)
+                sign = np.sign(d)[:, None]
+                near = np.sign(np.c_[np.r_[0.0, d[:-1]], np.r_[d[1:], 0.0]])
+                wrap &= np.any(near == -sign, axis=1) & ~np.any(near == sign, axis=1)
                 jumps += [f"trajectory {tid} at t = {t[k + 1]:.6g}" for k in np.nonzero(wrap)[0]]
             if jumps:
                 found.append(f"{name} stays within {lo:.4g} to {hi:.4g} and jumps by more than "
