@@ -290,6 +290,8 @@ def test_any_format_empty_garbage_and_truncated(tmp_path, ext):
         ({**GOOD, "names": np.array(["q"])}, r"got 1 variable names for 2 state columns"),
         ({**GOOD, "names": np.array([1, 2])}, r"`names`.*must hold strings.*int64"),
         ({**GOOD, "x": np.array([[1, 2], [np.nan, 0], [0, 0], [0, 0]])}, r"NaN or inf at row 1"),
+        ({**GOOD, "x": np.array([[1, 2], [np.nan, 0], [0, np.inf], [np.nan, 0]])},
+         r"NaN or inf at row 1 \(trajectory 0, t=1\.0\)\. 2 other rows \(2, 3\) have them too\."),
         ({**GOOD, "t": np.array([0.0, 1, 1, 1])}, r"strictly increasing.*trajectory 1 has t\[1\]=.*1\.0.* <= t\[0\]="),
         ({**GOOD, "trajectory": np.array([0, 0, 0, 1]), "t": np.arange(4.0)}, r"at least two samples.*trajectory 1 has 1"),
         ({**GOOD, "x": np.ones((4, 2, 2))}, r"x 2-D.*\(4, 2, 2\)"),
@@ -340,6 +342,10 @@ def test_npz_damaged_member(tmp_path):
         ("trajectory,t,q\n0,0,1\n0, ,1\n", r"line 3, column 't' is empty"),
         ("trajectory,t,q\n0,0,1\n\n0,1,nan\n", r"line 4, column 'q' holds 'nan'"),
         ("trajectory,t,q\n0,0,1\n0,1,-inf\n", r"line 3, column 'q' holds '-inf'"),
+        # Every bad cell in one run, not one per run (a new-user check fixed them one by one).
+        ("trajectory,t,q,p\n0,0,1,nan\n0,1,,2\n1,0,x,1\n", r"line 2, column 'p' holds 'nan'.* "
+         r"2 other cells are not a finite number either: line 3 column 'q' \(is empty\), "
+         r"line 4 column 'q' \(holds 'x'\)\.$"),
         ("trajectory,t,q\n0.5,0,1\n0.5,1,1\n", r"line 2: trajectory id '0\.5' is not an integer"),
         ("trajectory,t,q\n0,1,1\n0,0,1\n", r"strictly increasing.*sort the rows by trajectory and time"),
         ("trajectory,t,q\n0,0,1\n0,1,1\n1,0,1\n", r"at least two samples.*trajectory 1 has 1"),

@@ -59,10 +59,15 @@ def checked_columns(trajectory: Any, t: Any, x: Any, names: Any
     for arr, what in ((t, "t"), (x, "x")):
         bad = ~np.isfinite(arr)
         if np.any(bad):
-            row = int(np.flatnonzero(bad.reshape(len(arr), -1).any(axis=1))[0])
+            rows = np.flatnonzero(bad.reshape(len(arr), -1).any(axis=1))
+            row = int(rows[0])
+            others = (f" {len(rows) - 1} other row{'s' if len(rows) > 2 else ''} "
+                      f"({', '.join(map(str, rows[1:6].tolist()))}"
+                      f"{', ...' if len(rows) > 6 else ''}) {'have' if len(rows) > 2 else 'has'} "
+                      "them too." if len(rows) > 1 else "")
             raise MetriplexError(
                 f"data must be finite; {what} has NaN or inf at row {row} (trajectory "
-                f"{traj[row]}, t={t[row]}). Remove or interpolate those samples."
+                f"{traj[row]}, t={t[row]}).{others} Remove or interpolate those samples."
             )
     # Stable sort by trajectory id keeps rows of a trajectory in file order.
     if np.any(traj[1:] < traj[:-1]):  # already sorted (the usual case): no copies

@@ -127,6 +127,7 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
                 "such as 1,5 split cells, write decimal points" if len(r) > width else "") + ")."
             )
     arr = np.empty((len(body), width))
+    problems = []  # (line, column, what, fix) of every cell that is not a finite number
     for k, (r, line) in enumerate(zip(body, body_lines)):
         for j, (name, c) in enumerate(zip(header, r)):
             try:
@@ -144,10 +145,13 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
                 elif v is None and c.strip() and j == 1:
                     fix = ("Times are numbers in one unit, not dates or clock times: convert "
                            "the column (pandas: (t - t.iloc[0]).dt.total_seconds()).")
-                raise MetriplexError(
-                    f"{where}, line {line}, column {name!r} {what}; every cell must be a "
-                    f"finite number. {fix}"
-                )
+                problems.append((line, name, what, fix))
+    if problems:
+        line, name, what, fix = problems[0]
+        raise MetriplexError(
+            f"{where}, line {line}, column {name!r} {what}; every cell must be a finite "
+            f"number. {fix}" + _others(problems[1:])
+        )
     bad = np.flatnonzero(arr[:, 0] != np.round(arr[:, 0]))
     if len(bad):
         raise MetriplexError(
@@ -155,6 +159,18 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
             "not an integer; ids label trajectories 0, 1, 2, ..."
         )
     return build(arr, header)
+
+
+def _others(problems: list[tuple[int, str, str, str]]) -> str:
+    """The rest of a file's bad cells, so that one run names them all: their count and
+    where the first few are (file lines, the header being line 1)."""
+    if not problems:
+        return ""
+    shown = ", ".join(f"line {line} column {name!r} ({what})"
+                      for line, name, what, _ in problems[:5])
+    more = f", and {len(problems) - 5} more" if len(problems) > 5 else ""
+    other = "1 other cell is" if len(problems) == 1 else f"{len(problems)} other cells are"
+    return f" {other} not a finite number either: {shown}{more}."
 
 
 def write_csv(path: str | os.PathLike, data: Trajectories) -> None:
