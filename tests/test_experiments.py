@@ -93,6 +93,13 @@ def test_experiment_pipeline_writes_everything(tmp_path):
         assert error["error"].shape == (5, 21) and error["reference_error"].shape == (21,)
     with np.load(out / "figures" / "trajectories.npz") as saved:
         assert set(saved) >= {"true", "learned", "t"}
+    # The true temperatures beside the learned ones, in the learned energy's gauge: the
+    # true dE/ds_i (positive) times the energy fit's slope (a new-user check missed them).
+    slope = metrics["energy_gauge_fit"]["slope"]
+    with np.load(out / "figures" / "temperatures.npz") as temps:
+        true = temps["temperature_true_fitted"]
+        assert true.shape == temps["temperature"].shape == (len(temps["entropy_variables"]), 2)
+        assert np.all(true / slope > 0)
 
 
 def test_reproduce_honours_degeneracy_with_and_without_defaults():

@@ -59,3 +59,27 @@ def test_readme_train_defaults_from_python_call_the_api_as_it_is():
              "trained_scheme": checked("trained_scheme", "cn")}
     exec(compile(block.replace(imports, ""), "README.md", "exec"), scope)
     assert scope["config"].poisson == "canonical:1" and scope["config"].entropy == "sum:2"
+
+
+def test_readme_trained_run_in_python_runs(tmp_path, monkeypatch):
+    # The block that reads a trained run back: on a saved (untrained) model of the CLI
+    # example's shape, and that example's test file.
+    import jax.random as jr
+
+    text = (ROOT / "README.md").read_text()
+    block = re.search(r"\*\*A trained run in Python\*\*.*?```python\n(.*?)```", text, re.S).group(1)
+    test = generate("oscillator-bath", trajectories=2, steps=30, dt=0.022, seed=1)
+    mx.write(tmp_path / "test.npz", test)
+    model = mx.GenericModel(energy=mx.MLPPotential(3, key=jr.key(0)), entropy=mx.SumOf((2,)),
+                            poisson=mx.CanonicalPoisson(3, pairs=1),
+                            friction=mx.CholeskyFriction(3, key=jr.key(1)))
+    (tmp_path / "run").mkdir()
+    mx.save(tmp_path / "run" / "model.mpx", model, n=3, names=test.names)
+    monkeypatch.chdir(tmp_path)
+    scope: dict = {}
+    exec(compile(block, "README.md", "exec"), scope)
+    assert scope["E"].shape == scope["S"].shape == (len(test.x),)
+    assert np.allclose(scope["S"], test.x[:, 2], rtol=1e-6)  # S = s, given
+    assert scope["pred"].shape == (31, 3) and np.all(np.isfinite(np.asarray(scope["pred"])))
+    assert scope["terms"].friction.shape == (31, 3, 3)
+    assert (tmp_path / "q.png").exists()

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 import equinox as eqx
 import jax
@@ -38,13 +38,16 @@ class Truth:
     scheme at the data's step (``reference_error``, shape ``(T,)``, named by
     ``reference_label``), and the true E and S along the data after their best affine fit to the
     learned ones (``energy``, ``entropy``, shape ``(T,)``; ``None`` where unknown). The data
-    are then labelled ``data_label`` (in the legend and as their key in ``trajectories.npz``)."""
+    are then labelled ``data_label`` (in the legend and as their key in ``trajectories.npz``).
+    ``grad_energy``: the true ∇E at states of shape ``(m, n)``, in the learned E's gauge (times
+    the affine fit's slope), for the true temperatures beside the learned ones."""
 
     reference_error: np.ndarray | None = None
     reference_label: str = "ground truth"
     energy: np.ndarray | None = None
     entropy: np.ndarray | None = None
     data_label: str = "true"
+    grad_energy: Callable[[np.ndarray], np.ndarray] | None = None
 
 
 #: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ; and the one it
@@ -173,10 +176,13 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
                         dtype=np.float64)
         idx = list(model.entropy.indices)
         entropies = [names[i] for i in idx]
+        true = ({} if truth.grad_energy is None
+                else {"temperature_true_fitted": np.asarray(truth.grad_energy(x))[:, idx]})
         plots.save_figure(temperatures(x[:, idx], gE[:, idx], entropies,
-                                       gauge=identified(model)["temperatures"]),
+                                       gauge=identified(model)["temperatures"],
+                                       true=true.get("temperature_true_fitted")),
                           folder / TEMPERATURE_FIGURE, entropy_variables=x[:, idx],
-                          temperature=gE[:, idx], names=np.array(entropies))
+                          temperature=gE[:, idx], names=np.array(entropies), **true)
         bar.update()
 
 

@@ -23,10 +23,11 @@ GAUGE = {
 
 
 def temperatures(s: np.ndarray, T: np.ndarray, names: Sequence[str], *,
-                 gauge: str | None = None) -> Figure:
+                 gauge: str | None = None, true: np.ndarray | None = None) -> Figure:
     """One panel per entropy variable: the learned temperature ``T[:, i]`` against ``s[:, i]``
     at the same states (shape ``(states, k)`` both), a dotted line at zero; ``gauge``: a key of
-    :data:`GAUGE`, said in the title."""
+    :data:`GAUGE`, said in the title; ``true``: the true temperatures at the same states in the
+    learned energy's gauge (a known model's, scaled by the energy fit's slope), drawn beside."""
     k = T.shape[1]
     cols = min(k, 4)
     rows = -(-k // cols)
@@ -38,7 +39,11 @@ def temperatures(s: np.ndarray, T: np.ndarray, names: Sequence[str], *,
             ax.set_visible(False)
             continue
         finite = np.isfinite(s[:, i]) & np.isfinite(T[:, i])
-        ax.scatter(s[finite, i], T[finite, i], s=5, color="C3", alpha=0.6)
+        ax.scatter(s[finite, i], T[finite, i], s=5, color="C3", alpha=0.6, label="learned")
+        if true is not None:
+            ax.scatter(s[finite, i], true[finite, i], s=5, color="0.2", marker="x", lw=0.6,
+                       alpha=0.6, label="true × E fit's slope")
+            ax.legend(fontsize=7, loc="best")
         ax.axhline(0.0, color="0.5", lw=0.8, ls=":")
         ax.set_xlabel(names[i])
         ax.set_ylabel(f"learned dE/d{names[i]}")

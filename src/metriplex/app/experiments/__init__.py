@@ -39,6 +39,7 @@ from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
 from .._report import Truth, report_figures
+from ..._structure_check import _terms_at
 from ..runs import run_config, train_run, trained_scheme
 
 
@@ -302,6 +303,8 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme, rollout,
         reference_label="ground truth, Crank–Nicolson at the same dt",
         energy=fe["slope"] * E_t[m] + fe["offset"],
         entropy=None if fs is None else fs["slope"] * S_t[m] + fs["offset"],
+        grad_energy=lambda x: fe["slope"] * np.asarray(
+            _terms_at(system.model, jnp.asarray(x, jnp.float64)).grad_energy, dtype=np.float64),
     )
     report_figures(model, test, folder, scheme=scheme, k=k, rollout=rollout, truth=truth)
     return result
