@@ -28,6 +28,7 @@ from metriplex.verdict import train_reference, verdict
     (dict(poisson="lie-poisson", entropy="sum:2"), ("factor", "given", "factor")),
     (dict(entropy="zero", friction="zero"), ("factor", "zero", None)),
     (dict(poisson="zero", entropy="sum:2", friction="zero"), ("none", "given", "ratios")),
+    (dict(poisson="zero"), ("function", "function_of_energy", "none")),
 ])
 def test_what_the_data_determine_follows_which_blocks_are_given(flags, gauges):
     data = systems.generate("oscillator-bath", trajectories=3, steps=5, seed=0)
@@ -91,3 +92,22 @@ def test_a_learned_entropy_says_its_temperatures_are_not_determined():
     assert report["temperature_min"] is None
     assert "S is learned, so the temperatures are not determined" in \
         report["null_reasons"]["temperature_min"]
+
+
+def test_with_l_zero_s_is_fixed_only_up_to_a_function_of_s_and_e():
+    # A new-user check's two rooms and a wall (L = 0, S learned): the learned S grew along
+    # every trajectory but ordered states against the entropy (Spearman -0.72), and the note
+    # said "up to an increasing function of itself". S + h(E) is the same flow: M grad E = 0.
+    system = systems.get_system("heat-exchange")
+    data = systems.generate(system, trajectories=4, steps=20, seed=2)
+    truth = system.model
+    E, S = mx.diagnostics.energy_entropy_along(truth, data.x)
+    shifted = eqx.tree_at(lambda m: m.entropy, truth, mx.Known(
+        lambda x: truth.entropy(x) - 3.0 * np.std(S) * ((truth.energy(x) - E.mean()) / E.std()) ** 2))
+    x = jnp.asarray(data.x[::5])
+    np.testing.assert_allclose(jax.vmap(shifted.vector_field)(x),
+                               jax.vmap(truth.vector_field)(x), rtol=1e-9, atol=1e-12)
+    learned = build_model(RunConfig(poisson="zero"), data, key=jr.key(0))
+    (line,) = [w for w in structure_warnings(mx.diagnostics.structure_residuals(learned, data.x))
+               if w.startswith("note:")]
+    assert "S only up to G(S, E), any function that increases with S at fixed E" in line

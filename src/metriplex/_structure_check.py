@@ -224,6 +224,11 @@ IDENTIFIED = {
         "zero": "S = 0 (no irreversible part)",
         "function": "S only up to an increasing function of itself, G(S) (with M/G'(S) the "
                     "flow is the same): where it grows, not its scale or shape",
+        "function_of_energy": "S only up to G(S, E), any function that increases with S at "
+                              "fixed E: with L = 0 a function of E added to S leaves M grad S "
+                              "unchanged (M grad E = 0), so the learned S grows along each "
+                              "trajectory but need not order states of different energy as "
+                              "the entropy does",
     },
     "temperatures": {
         "determined": "the temperatures dE/ds_i where heat flows",
@@ -247,7 +252,8 @@ def identified(model: GenericModel) -> dict[str, Any]:
     :math:`(L/a, aE)`; with :math:`L = 0`, E enters only through :math:`M\nabla E = 0`, which
     any :math:`F(E)` satisfies. A learned S is fixed only up to an increasing :math:`G(S)`
     (:math:`L\nabla G(S) = 0` still, and :math:`M/G'` keeps :math:`M\nabla S`), so
-    :math:`\partial E/\partial S` is not determined. These are properties of the structure,
+    :math:`\partial E/\partial S` is not determined; with :math:`L = 0` up to :math:`G(S, E)`
+    increasing in S (:math:`M\nabla E = 0` absorbs :math:`\partial G/\partial E`). These are properties of the structure,
     not of a training: no amount of data fixes them."""
     learned = [k for k, block in (("E", model.energy), ("S", model.entropy),
                                   ("L", model.poisson), ("M", model.friction)) if weights(block)]
@@ -259,7 +265,10 @@ def identified(model: GenericModel) -> dict[str, Any]:
         entropy = "zero"
     else:
         entropy = "function" if "S" in learned else "given"
-    temperatures = ("none" if entropy == "function" else None
+        if entropy == "function" and isinstance(model.poisson, ZeroPoisson) and not isinstance(
+                model.energy, ZeroPotential):
+            entropy = "function_of_energy"
+    temperatures = ("none" if entropy.startswith("function") else None
                     if not isinstance(model.entropy, SumOf) else
                     {"constant": "determined", "factor": "factor"}.get(energy, "ratios"))
     parts = [IDENTIFIED["energy"][energy] if "E" in learned else "E is given",

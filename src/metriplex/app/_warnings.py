@@ -46,7 +46,7 @@ def identified_note(metrics: dict) -> list[str]:
     constant and S as given: a physicist reading the learned E or S needs its gauge."""
     ident = metrics.get("identified") or {}
     if not (("E" in ident.get("learned", ()) and ident.get("energy") != "constant")
-            or ident.get("entropy") == "function"):
+            or str(ident.get("entropy")).startswith("function")):
         return []
     negative, mixed = (metrics.get(k) for k in ("temperature_negative_fraction",
                                                  "temperature_mixed_fraction"))
