@@ -114,8 +114,9 @@ def test_evaluate_shows_progress_and_rolls_out_once(files, tmp_path, monkeypatch
     assert "structure residuals" in res.stderr, res.stderr
     # Three batches, once for the metrics and the figures together; then the step check's
     # rollout with every interval in four, as four rollouts of the data grid's shape, one
-    # after another (the data-grid rollout itself is reused, not repeated).
-    assert calls == [(2, 11)] * 3 + [(6, 11)] * 4, calls
+    # after another (the data-grid rollout itself is reused, not repeated); last, the twins
+    # from nearby states (initial_state_sensitivity), of the same shape.
+    assert calls == [(2, 11)] * 3 + [(6, 11)] * 5, calls
     assert json.loads((tmp_path / "m.json").read_text())["trajectory_ids"] == list(range(6))
     assert (tmp_path / "fig" / "error.png").exists()
     quiet = run("evaluate", files / "run", files / "data.npz", "--no-verdict", "--quiet")

@@ -1,7 +1,10 @@
-"""How much more entropy a model's rollouts make than the data show: part of
-:func:`metriplex.evaluate`'s report (``entropy_rise_over_data_spread``)."""
+"""The learned entropy along a model's rollouts, in :func:`metriplex.evaluate`'s report: how
+much more of it they make than the data show (``entropy_rise_over_data_spread``), and how far
+a step of it may fall by rounding alone (``entropy_step_rounding``)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -31,3 +34,21 @@ def entropy_rise(S: np.ndarray, S_data: np.ndarray, lengths: np.ndarray, failed:
     else:
         return float(np.mean(rise)) / spread
     return None
+
+
+#: An entropy step along a rollout counts as a decrease only where it falls by more than this
+#: many rounding units of the largest |S| along the rollout, in the model's precision.
+ENTROPY_ROUNDING_UNITS = 16
+
+
+def entropy_step_rounding(S: np.ndarray, dtype: Any) -> float:
+    """How far an entropy step along a rollout, ``S`` the entropy at its states, may fall by
+    rounding alone: :data:`ENTROPY_ROUNDING_UNITS` units of the largest ``|S|`` in ``dtype``
+    (the model's precision, in which the states and ``S`` were computed), and at least
+    ``1e-12 max(1, |S|)``. Where the entropy production vanishes (at an equilibrium) a float32
+    rollout's entropy steps are rounding of about one unit either way, not a decrease."""
+    finite = np.abs(np.asarray(S, dtype=np.float64))
+    finite = finite[np.isfinite(finite)]
+    top = float(finite.max()) if finite.size else 0.0
+    return max(ENTROPY_ROUNDING_UNITS * float(np.finfo(dtype).eps) * top,
+               1e-12 * max(1.0, top))

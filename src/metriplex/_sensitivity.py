@@ -113,3 +113,72 @@ def _refined_rollout(model, scheme, x0, fine, w):
     last = np.where(failed < 0, xs.shape[1], failed)
     xs[np.arange(xs.shape[1])[None, :] >= last[:, None]] = np.nan
     return xs, failed
+
+
+#: Defaults of :func:`initial_state_sensitivity`: the twins start this far apart (in standard
+#: deviations of the data), and a separation of ``TWIN_APART`` is where the prediction is no
+#: longer that of the given initial state (100-fold growth).
+TWIN_OFFSET = 1e-3
+TWIN_APART = 0.1
+
+
+@in_full_precision
+def initial_state_sensitivity(model: GenericModel, data: Trajectories, *,
+                              scheme: AbstractScheme | None = None,
+                              rollout: tuple[Rollout, np.ndarray, np.ndarray] | None = None,
+                              trajectories: int = SENSITIVITY_TRAJECTORIES,
+                              offset: float = TWIN_OFFSET, apart: float = TWIN_APART,
+                              ) -> tuple[dict, dict[str, str]]:
+    r"""How fast the model's own rollouts from nearby states separate: the horizon over which
+    its predictions are those of their initial state.
+
+    From the first state of up to ``trajectories`` trajectories (evenly spread) and from that
+    state moved by ``offset`` standard deviations of the data (one fixed direction), the model
+    is rolled out over each whole trajectory; the twins' separation is measured in standard
+    deviations. Returns ``(report, null_reasons)``: ``twin_growth``, the median over the
+    trajectories of the largest separation over the first; and ``predictability_time``, the
+    median time from the first state at which the separation reaches ``apart`` (a
+    ``apart / offset``-fold growth; a trajectory whose twins never get there counts as
+    never), ``None`` where most never do. Chaotic motion separates twins exponentially, a
+    regular one whose period depends on its amplitude linearly; beyond that time any model's
+    error, the true one's included, is mostly that growth, so a whole-trajectory error there
+    measures the motion's sensitivity as much as the model.
+
+    ``rollout``: what :func:`metriplex.diagnostics.rollout_data` returned for this model, data
+    and scheme (the first of each twin; rolled out here when ``None``)."""
+    scheme = CrankNicolson() if scheme is None else scheme
+    keys = ("twin_growth", "predictability_time")
+    ts, xs, lengths = data.padded()
+    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
+                     .astype(int))
+    dtype = float_dtype(model)
+    if rollout is None:
+        base = np.asarray(solve(model, jnp.asarray(xs[pick, 0], dtype), ts[pick], scheme=scheme,
+                                retry=RETRY_SUBSTEPS).xs, np.float64)
+    else:
+        base = np.asarray(rollout[0].xs, np.float64)[pick]
+    d = state_scale(data.x)
+    u = np.random.default_rng(0).standard_normal(len(d))
+    x0 = jnp.asarray(xs[pick, 0], dtype)
+    twin0 = jnp.asarray(xs[pick, 0] + offset * d * u / np.linalg.norm(u), dtype)
+    twin = np.asarray(solve(model, twin0, ts[pick], scheme=scheme, retry=RETRY_SUBSTEPS).xs,
+                      np.float64)
+    start = np.linalg.norm((np.asarray(twin0, np.float64) - np.asarray(x0, np.float64)) / d,
+                           axis=-1)
+    sep = np.linalg.norm((twin - base) / d, axis=-1)  # (trajectories, T); NaN after a failure
+    valid = np.arange(ts.shape[1])[None, :] < lengths[pick][:, None]
+    ok = (start > 0) & np.all(np.isfinite(sep) | ~valid, axis=1)
+    if not ok.any():
+        why = "no trajectory completed both twins' rollouts, or the offset is below rounding"
+        return dict.fromkeys(keys), dict.fromkeys(keys, why)
+    growth = np.where(valid, sep, 0.0)[ok].max(axis=1) / start[ok]
+    reached = valid & (sep >= apart)
+    when = np.array([ts[k, np.argmax(r)] - ts[k, 0] if r.any() else np.inf
+                     for k, r in zip(pick[ok], reached[ok])])
+    median = float(np.median(when))
+    report = {"twin_growth": float(np.median(growth)),
+              "predictability_time": median if np.isfinite(median) else None}
+    reasons = {} if np.isfinite(median) else {"predictability_time": (
+        f"rollouts from states {offset:g} standard deviations apart stay within {apart:g} of "
+        f"each other in most of {int(ok.sum())} trajectories")}
+    return report, reasons

@@ -15,7 +15,9 @@ One set of functions judges ground-truth systems and learned models alike:
   the model's rollouts;
 - the step sensitivity: how much of the predicted motion changes when the data's time step is
   refined (:func:`step_sensitivity`), which tells a model of the system's vector field from one
-  that is right only with its scheme at the data's step;
+  that is right only with its scheme at the data's step; and how soon the model's rollouts
+  from nearby states part (:func:`initial_state_sensitivity`: chaos, or a period that
+  depends on the amplitude), beyond which an error measures that as much as the model;
 - what the data can determine of the learned E, S and temperatures at all, from which blocks
   are given and which learned (``identified``, :func:`identified`: e.g. with L = 0 the energy
   only up to a function of itself).
@@ -39,7 +41,8 @@ import numpy as np
 from ._errors import MetriplexError
 from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
-from ._entropy_rise import entropy_rise
+from ._entropy_rise import ENTROPY_ROUNDING_UNITS as ENTROPY_ROUNDING_UNITS
+from ._entropy_rise import entropy_rise, entropy_step_rounding as entropy_step_rounding
 from ._entropy_production import (  # noqa: F401 (re-exported)
     entropy_production_negative_fraction as entropy_production_negative_fraction,
 )
@@ -54,6 +57,7 @@ from ._threads import cpu_threads, in_this_threads_config
 from ._sensitivity import SENSITIVITY_REFINE as SENSITIVITY_REFINE
 from ._sensitivity import SENSITIVITY_STEPS as SENSITIVITY_STEPS
 from ._sensitivity import SENSITIVITY_TRAJECTORIES as SENSITIVITY_TRAJECTORIES
+from ._sensitivity import initial_state_sensitivity as initial_state_sensitivity
 from ._sensitivity import step_sensitivity as step_sensitivity
 
 _TINY = 1e-300
@@ -166,7 +170,8 @@ def evaluate(
     ``rollout``: what :func:`rollout_data` returned for this model, data and scheme, to reuse
     (otherwise the trajectories are rolled out here, with a progress bar when ``progress``).
     ``step_check``: also report ``step_sensitivity`` (:func:`step_sensitivity`; one more
-    rollout of a few trajectories with a 4x smaller step).
+    rollout of a few trajectories with a 4x smaller step), ``twin_growth`` and
+    ``predictability_time`` (:func:`initial_state_sensitivity`; one more of nearby states).
 
     ```python
     report = mx.evaluate(model, data)
@@ -321,6 +326,9 @@ def evaluate(
         bar.set_postfix_str("step sensitivity")
         sensitivity, why = step_sensitivity(model, data, scheme=scheme, rollout=rollout)
         report["step_sensitivity"] = known(sensitivity, "step_sensitivity", why)
+        twins, why_not = initial_state_sensitivity(model, data, scheme=scheme, rollout=rollout)
+        report.update(twins)
+        null_reasons.update(why_not)
         bar.update()
     bar.set_postfix_str("structure residuals")
     structure = structure_residuals(model, data.x)
@@ -330,24 +338,6 @@ def evaluate(
     report.update(structure)
     report["null_reasons"] = null_reasons
     return report
-
-
-#: An entropy step along a rollout counts as a decrease only where it falls by more than this
-#: many rounding units of the largest |S| along the rollout, in the model's precision.
-ENTROPY_ROUNDING_UNITS = 16
-
-
-def entropy_step_rounding(S: np.ndarray, dtype: Any) -> float:
-    """How far an entropy step along a rollout, ``S`` the entropy at its states, may fall by
-    rounding alone: :data:`ENTROPY_ROUNDING_UNITS` units of the largest ``|S|`` in ``dtype``
-    (the model's precision, in which the states and ``S`` were computed), and at least
-    ``1e-12 max(1, |S|)``. Where the entropy production vanishes (at an equilibrium) a float32
-    rollout's entropy steps are rounding of about one unit either way, not a decrease."""
-    finite = np.abs(np.asarray(S, dtype=np.float64))
-    finite = finite[np.isfinite(finite)]
-    top = float(finite.max()) if finite.size else 0.0
-    return max(ENTROPY_ROUNDING_UNITS * float(np.finfo(dtype).eps) * top,
-               1e-12 * max(1.0, top))
 
 
 def _check_inputs(model, data, scheme, horizon) -> None:
