@@ -53,3 +53,32 @@ def test_a_share_of_evaluated_states_beyond_three_standard_deviations_is_noted()
     assert "(most often T)" in line
     few = mx.Trajectories.from_list([(t, inside)] * 3 + [(t, beyond)], ("q", "T"))  # 5 %
     assert training_range_warning(UNITS, few) == []
+
+
+def test_states_beyond_three_standard_deviations_but_within_the_training_range_are_no_note():
+    # A damped oscillator's large first swings are rare: 4 % of a new-user check's training
+    # states lay beyond 3 standard deviations, and its test states, reaching no further than
+    # the training ones, were told "there the model extrapolates".
+    import metriplex as mx
+    from metriplex.app._warnings import training_range_warning
+
+    t = np.arange(200) * 0.1
+    swings = [np.stack([a * np.exp(-0.3 * t) * np.cos(t), -a * np.exp(-0.3 * t) * np.sin(t)], 1)
+              for a in (1.0, 1.2, 1.4, 1.6)]
+    train = mx.Trajectories.from_list([(t, x) for x in swings], ("q", "p"))
+    units = mx.Units.from_data(train)
+    assert units.low is not None and units.high is not None
+    from metriplex._verdict_training import BEYOND
+
+    z = np.abs((train.x - np.asarray(units.shift)) / np.asarray(units.scale))
+    assert np.mean(np.any(z > BEYOND, axis=1)) > 0.05  # the training data's own share
+    same = train.select([1, 3])
+    assert training_range_warning(units.to_json(), same) == []
+    # Without the range (an older run's units) the same data get the note.
+    old = {k: v for k, v in units.to_json().items() if k not in ("low", "high")}
+    (line,) = training_range_warning(old, same)
+    assert line.startswith("note:")
+    # Beyond the range they still do: an undamped swing, up to 4 standard deviations.
+    larger = mx.Trajectories.from_list([(t, np.stack([np.cos(t), -np.sin(t)], 1))], ("q", "p"))
+    (line,) = training_range_warning(units.to_json(), larger)
+    assert line.startswith("note:") and "beyond the training data's range" in line

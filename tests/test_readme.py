@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _python_example() -> str:
     text = (ROOT / "README.md").read_text()
-    block = re.search(r"## In Python\n\n```python\n(.*?)```", text, re.S).group(1)
+    block = re.search(r"\*\*The low-level path: one `fit`\.\*\*.*?```python\n(.*?)```", text,
+                      re.S).group(1)
     assert "mx.fit(" in block
     return block
 
@@ -35,16 +36,19 @@ def test_readme_python_example_runs(tmp_path, monkeypatch):
     assert history.valid["total"][-1] < history.valid["total"][0]
 
 
-def test_readme_train_defaults_from_python_call_the_api_as_it_is():
-    # The second Python block trains as `metriplex train` does (a full training: too long for
+def test_readme_train_defaults_from_python_call_the_api_as_it_is(tmp_path, monkeypatch):
+    # The first Python block trains as `metriplex train` does (a full training: too long for
     # the default run), so its calls are bound to the real signatures without running them.
     import inspect
 
     from metriplex import runs
 
+    mx.write(tmp_path / "data.npz", generate("oscillator-bath", trajectories=5, steps=10,
+                                             dt=0.022, seed=0))
+    monkeypatch.chdir(tmp_path)
+
     text = (ROOT / "README.md").read_text()
-    block = re.search(r"\*\*`metriplex train`'s defaults from Python\.\*\*.*?```python\n(.*?)```",
-                      text, re.S).group(1)
+    block = re.search(r"## In Python\n\n.*?```python\n(.*?)```", text, re.S).group(1)
     imports = "from metriplex.runs import evaluate_run, run_config, train_run, trained_scheme\n"
     assert imports in block
 
@@ -54,11 +58,12 @@ def test_readme_train_defaults_from_python_call_the_api_as_it_is():
             return result
         return call
 
-    scope = {"data": None, "test": None, "train_run": checked("train_run", (None,) * 5),
+    scope = {"train_run": checked("train_run", (None,) * 5),
              "evaluate_run": checked("evaluate_run", {}), "run_config": checked("run_config", {}),
              "trained_scheme": checked("trained_scheme", "cn")}
     exec(compile(block.replace(imports, ""), "README.md", "exec"), scope)
     assert scope["config"].poisson == "canonical:1" and scope["config"].entropy == "sum:2"
+    assert len(scope["data"]) == 4 and len(scope["test"]) == 1
 
 
 def test_readme_trained_run_in_python_runs(tmp_path, monkeypatch):
@@ -82,4 +87,6 @@ def test_readme_trained_run_in_python_runs(tmp_path, monkeypatch):
     assert np.allclose(scope["S"], test.x[:, 2], rtol=1e-6)  # S = s, given
     assert scope["pred"].shape == (31, 3) and np.all(np.isfinite(np.asarray(scope["pred"])))
     assert scope["terms"].friction.shape == (31, 3, 3)
+    assert scope["scheme"].name == "cn"  # no config.json: the default step
+    assert scope["report"]["rollout_failures"] == 0
     assert (tmp_path / "q.png").exists()

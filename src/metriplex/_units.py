@@ -34,7 +34,9 @@ class Units:
       the data a model is judged on: a model that learnt from rougher data than those is not
       refuted by fitting them less well than a field trained on them;
     - ``pairs``: how many pairs of consecutive samples the data hold (``None`` where unknown),
-      which the verdict compares with the pairs its reference trains on.
+      which the verdict compares with the pairs its reference trains on;
+    - ``low``, ``high``: each variable's least and greatest value in the data (``None`` where
+      unknown), the extent beyond which judged data are extrapolation.
 
     In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
     :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
@@ -52,6 +54,8 @@ class Units:
     entropy: float = 1.0
     roughness: float | None = None
     pairs: int | None = None
+    low: tuple[float, ...] | None = None
+    high: tuple[float, ...] | None = None
 
     @classmethod
     def from_data(cls, data: "Trajectories", *, poisson: AbstractPoisson | None = None,
@@ -93,7 +97,8 @@ class Units:
             if size is not None:
                 entropy_scale = 1.0 / (tau * size)
         return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d),
-                   len(data.t) - len(data.ids))
+                   len(data.t) - len(data.ids), tuple(map(float, np.min(data.x, axis=0))),
+                   tuple(map(float, np.max(data.x, axis=0))))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
         """How far the states ``x`` (rows) reach from these units' data: the largest

@@ -290,8 +290,9 @@ def _coverage_note(trained: Units, data: Trajectories) -> list[str]:
     if share <= _LIMITS.training_coverage:
         return []
     return [f"note: {share:.0%} of the evaluated states lie beyond {BEYOND:g} training standard "
-            f"deviations of the training mean in some variable (most often {most}): there the "
-            "model extrapolates, and the errors grow with how far it must."]
+            f"deviations of the training mean, and beyond the training data's range, in some "
+            f"variable (most often {most}): there the model extrapolates, and the errors grow "
+            "with how far it must."]
 
 
 #: A validation part whose every variable spreads less than this share of its spread in the
