@@ -626,6 +626,13 @@ def test_a_learned_entropy_is_told_apart_from_a_given_one():
 
     assert weights(mx.MLPPotential(3, width=4, depth=1, key=jr.key(0)))
     assert not weights(mx.SumOf((2,))) and not weights(mx.Known(lambda x: x[0]))
+    # Its advice names both ways out: the entropy variables, or none for a system that
+    # conserves its energy (new-user check 16: Henon-Heiles with S and M left to the
+    # defaults was told to give entropy variables it does not have).
+    from metriplex._verdict_checks import UNIDENTIFIED_SPLIT
+
+    assert "--entropy sum:I,J" in UNIDENTIFIED_SPLIT
+    assert "--entropy zero --friction zero" in UNIDENTIFIED_SPLIT
 
 
 def test_a_residual_far_beyond_the_reference_is_not_hidden_by_the_tolerance():

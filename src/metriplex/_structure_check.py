@@ -103,21 +103,18 @@ def structure_residuals(model: GenericModel, x: np.ndarray, *, max_states: int =
     rel_MS = relative(np.linalg.norm(MgE / d[None, :], axis=1), nM * nE,
                       "degeneracy_M_gradE_relative",
                       "M or grad E is zero at every state: M grad E = 0 holds trivially")
-    J, T = _jacobi_parts(model, xj[: min(len(x), 64)])
-    J, T = f64(J), f64(T)
-    jac_abs = np.sqrt(np.sum(J**2, axis=(1, 2, 3)))
-    ddd = d[:, None, None] * d[None, :, None] * d[None, None, :]
     # Each of the three cyclic terms of J has the Frobenius norm of T = (dL) L; measure J
     # against their sum, so 1 means "no cancellation at all" and 0 an exact Poisson bracket.
-    nJ = np.sqrt(np.sum((J / ddd[None]) ** 2, axis=(1, 2, 3)))
-    nT = np.sqrt(np.sum((T / ddd[None]) ** 2, axis=(1, 2, 3)))
+    xs = xj[: min(len(x), 64)]
+    batch = max(1, min(len(xs), JACOBI_ENTRIES // n**3))
+    jac_abs, nJ, nT = (f64(a) for a in _jacobi_norms(model, xs, jnp.asarray(d, xj.dtype), batch))
     jac_rel = relative(nJ, 3.0 * nT, "jacobi_residual_relative",
                        "the product (dL) L of L's derivative and L is zero at every state (L "
                        "is constant, or zero): the Jacobi identity holds exactly")
     # Against |L|^2 where L varies less than its own size over a standard deviation: a learned
     # L close to a constant one (the canonical L of most systems) has a small (dL) L whose few
     # cancellations say nothing, while it is as close to a Poisson bivector as |J| is to |L|^2.
-    jac_to_L = relative(nJ, 3.0 * np.maximum(nT, nL[: len(J)] ** 2), "jacobi_residual_to_L",
+    jac_to_L = relative(nJ, 3.0 * np.maximum(nT, nL[: len(nJ)] ** 2), "jacobi_residual_to_L",
                         "L is zero at every state: it is Poisson")
     eig = np.linalg.eigvalsh(0.5 * (Ms + np.swapaxes(Ms, 1, 2)))
     nL_raw = np.linalg.norm(L, axis=(1, 2))
@@ -194,19 +191,36 @@ def _terms_at(model, xs):
     return jax.vmap(model.terms)(xs)
 
 
+#: At most this many entries of the (n, n, n) Jacobi tensor exist at once in
+#: :func:`_jacobi_norms` (its states run in batches): 64 states of 200 variables at once took
+#: more than 10 GB.
+JACOBI_ENTRIES = 2**22
+
+
 @eqx.filter_jit
-def _jacobi_parts(model: GenericModel, xs):
-    """``(J, T)`` at each state of ``xs``: the Jacobi tensor and ``T = (dL) L``, whose three
-    index permutations sum to ``J`` (see :meth:`GenericModel.jacobi_tensor`)."""
+def _jacobi_norms(model: GenericModel, xs, d, batch: int):
+    """At each state of ``xs``, the Frobenius norms of the Jacobi tensor ``J``, of ``J`` and of
+    ``T = (dL) L`` in the coordinates ``x / d`` (``J``: the three index permutations of ``T``
+    summed, :meth:`GenericModel.jacobi_tensor`). The states run ``batch`` at a time (at most
+    :data:`JACOBI_ENTRIES` tensor entries, in :func:`structure_residuals`), so memory does not
+    grow with their number; each norm is taken of the tensor over its largest entry, which
+    no float32 square overflows."""
     from ._model import _value_and_jacfwd
+
+    n = xs.shape[1]
+    ddd = d[:, None, None] * d[None, :, None] * d[None, None, :]
+
+    def norm(a):
+        top = jnp.max(jnp.abs(a))
+        return top * jnp.sqrt(jnp.sum((a / jnp.where(top > 0, top, 1.0)) ** 2))
 
     def one(x):
         L, dL = _value_and_jacfwd(model.poisson_matrix, x)
-        n = x.shape[0]
         T = (dL.reshape(n * n, n) @ L).reshape(n, n, n)
-        return T + jnp.transpose(T, (1, 2, 0)) + jnp.transpose(T, (2, 0, 1)), T
+        J = T + jnp.transpose(T, (1, 2, 0)) + jnp.transpose(T, (2, 0, 1))
+        return norm(J), norm(J / ddd), norm(T / ddd)
 
-    return jax.vmap(one)(xs)
+    return jax.lax.map(one, xs, batch_size=batch)
 
 
 #: What :func:`identified` says of E, S and the temperatures, by the gauge each is fixed up to.

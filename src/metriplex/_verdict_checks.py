@@ -44,7 +44,9 @@ _SPLIT_CHECKS = {"degeneracy_L_gradS", "jacobi", "entropy_production", "reversib
 UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the motion splits "
                       "into L grad E and M grad S (any flow that conserves the learned E can "
                       "be written as L grad E), so such checks fail on GENERIC data too: give "
-                      "what is known, such as the entropy variables (--entropy sum:I,J).")
+                      "what is known, such as the entropy variables (--entropy sum:I,J), or, "
+                      "for a system that conserves its energy and has none, --entropy zero "
+                      "--friction zero.")
 
 
 #: What a "cannot tell" adds where the learned L failed the Jacobi check: a user asking "is it
