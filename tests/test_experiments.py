@@ -66,7 +66,7 @@ def test_experiment_pipeline_writes_everything(tmp_path):
     learned and the untrained model are one compiled program."""
     name = "pendulum-energetic"
     out = tmp_path / name
-    metrics = run_experiment(name, quick=True, out=out, progress=False,
+    metrics = run_experiment(name, quick=True, out=out, progress=False, verdict=True,
                              size=Size(trajectories=25, steps=20, train_steps=20,
                                        test_trajectories=5, test_steps=20))
     key = "rollout_error_to_horizon_mean"
@@ -77,6 +77,10 @@ def test_experiment_pipeline_writes_everything(tmp_path):
     assert len(metrics["time_to_10pct_error"]) == 5
     saved = json.loads((out / "metrics.json").read_text())
     assert saved[key] == pytest.approx(metrics[key])
+    # The verdict, as evaluate gives it (20 training steps: not converged, so not consistent).
+    assert saved["verdict"]["outcome"] in ("cannot tell", "not consistent")
+    assert any(r["name"] == "training_converged" and r["passed"] is False
+               for r in saved["verdict"]["reasons"])
     assert set(saved["bars"]) == set(EXPERIMENTS[name].bars)
     for k in ("ground_truth_cn", "energy_gauge_fit", "energy_relative_drift_gauge_fixed",
               "true_energy_relative_drift", "train_seconds", "untrained_rollout_error"):

@@ -396,4 +396,4 @@ def cmd_reproduce(args: argparse.Namespace) -> None:
             print(lock.note, file=sys.stderr)
         run_experiment(args.experiment, quick=args.quick, out=out, overwrite=args.overwrite,
                        degeneracy=args.degeneracy, progress=not args.quiet,
-                       defaults=args.defaults)
+                       defaults=args.defaults, verdict=False if args.no_verdict else None)

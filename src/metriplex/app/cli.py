@@ -184,6 +184,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--defaults", action="store_true",
                    help="train with the experiment's structure only (what is learned, what is "
                    "given) and default settings, as without a preset")
+    p.add_argument("--no-verdict", action="store_true",
+                   help="skip the verdict on the test data (is it GENERIC?), which trains a "
+                   "black-box reference as evaluate does (a --quick run has none)")
     p.add_argument("--overwrite", action="store_true", help=_OVERWRITE)
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_reproduce)

@@ -104,6 +104,7 @@ def run_experiment(
     progress: bool = True,
     size: Size | None = None,
     defaults: bool = False,
+    verdict: bool | None = None,
     **overrides: Any,
 ) -> dict[str, Any]:
     """Run experiment ``name`` end to end; return its metrics (also in ``out/metrics.json``).
@@ -115,6 +116,11 @@ def run_experiment(
     ``defaults=True`` the run uses only the preset's structure (what is learned and what is
     given, and the Jacobi penalty for a learned L) and every other setting at its default, as a
     user without the preset would: no features, default learning rate, steps and schedule.
+    ``verdict``: also ask whether the test data are consistent with the learned structure, as
+    ``metriplex evaluate`` does (:func:`metriplex.verdict.verdict`; a black-box reference
+    trains on the test data, seconds to a minute), printed and kept in ``metrics.json``;
+    ``None``: for full runs only (a quick run's training is a step budget, which the verdict
+    would report as not converged).
     """
     from ...systems import generate, get_system
 
@@ -122,6 +128,7 @@ def run_experiment(
     if degeneracy not in (None, "soft", "exact"):
         raise MetriplexError(f"--degeneracy must be soft or exact; got {degeneracy!r}.")
     size = size if size is not None else exp.quick if quick else exp.full
+    verdict = not quick if verdict is None else verdict
     out = Path(out) if out is not None else default_out(name, quick=quick, defaults=defaults)
     jax.config.update("jax_enable_x64", True)  # ground truth in float64; training in float32
     system = get_system(exp.system, **exp.system_params)
@@ -171,6 +178,8 @@ def run_experiment(
             "met": _met(k, metrics.get(k), v, metrics.get("entropy_step_rounding"))}
         for k, v in exp.bars.items()
     }
+    if verdict:
+        metrics["verdict"] = _verdict(model, test, metrics, out, progress)
     write_json(out / "metrics.json", metrics)
     key = "rollout_error_to_horizon_mean" if horizon else "rollout_error_mean"
     still = metrics[key.replace("rollout_error", "constant_prediction_error")]
@@ -196,7 +205,28 @@ def run_experiment(
               f"{b['target']:.0e}: {'met' if b['met'] else 'NOT met'}")
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
+    if verdict:
+        print(f"verdict: {metrics['verdict']['statement']}")
+    elif quick:
+        print(f"  no verdict for a quick run (its training is a step budget); run without "
+              f"--quick, or: metriplex evaluate {out} {out / 'test_data.npz'}")
     return metrics
+
+
+def _verdict(model, test, metrics: dict[str, Any], out: Path, progress: bool) -> dict[str, Any]:
+    """``metriplex evaluate``'s verdict of the run in ``out`` on the test data ``test``, whose
+    report ``metrics`` is: the reference trained as evaluate trains it for that run."""
+    from ...verdict import verdict
+    from .._warnings import trained_units
+    from ..runs import training_outcome
+
+    run = run_config(out)
+    cfg, ended = run.get("config", {}), training_outcome(out)
+    return verdict(model, test, report=metrics, converged=ended["converged"],
+                   stopped=ended["stopped"], width=cfg.get("width", 64),
+                   depth=cfg.get("depth", 2), learning_rate=cfg.get("lr", 1e-2),
+                   batch_size=cfg.get("batch_size", 256), progress=progress,
+                   trained_on=trained_units(run.get("units") or {}))
 
 
 def _met(key, value, target, rounding=None):
