@@ -1,6 +1,7 @@
 """A failed rollout says whether it had left the training data before it failed."""
 
 import numpy as np
+import pytest
 
 from metriplex.app._commands import FAR_FROM_DATA, _departure
 
@@ -82,3 +83,25 @@ def test_states_beyond_three_standard_deviations_but_within_the_training_range_a
     larger = mx.Trajectories.from_list([(t, np.stack([np.cos(t), -np.sin(t)], 1))], ("q", "p"))
     (line,) = training_range_warning(units.to_json(), larger)
     assert line.startswith("note:") and "beyond the training data's range" in line
+
+
+def test_steps_far_larger_than_the_training_steps_are_warned_about():
+    # A new-user check gave rollout its initial states with one more sample at t = 10, 200
+    # training steps away: each was predicted in one step (errors up to 7.6, an entropy
+    # that fell), every status "ok", nothing said.
+    import metriplex as mx
+    from metriplex.app._warnings import time_unit_warning
+
+    t = np.arange(101) * 0.05
+    swing = np.stack([np.cos(t), -np.sin(t)], axis=1)
+    units = mx.Units.from_data(mx.Trajectories.from_list([(t, swing), (t, 0.5 * swing)],
+                                                         ("q", "p"))).to_json()
+    assert units["step"] == pytest.approx(0.05)
+    two = mx.Trajectories.from_list([(np.array([0.0, 5.0]), swing[[0, 100]])], ("q", "p"))
+    (line,) = [w for w in time_unit_warning(units, two) if "steps reach" in w]
+    assert "steps reach 5, 100 times the training data's largest (0.05)" in line
+    assert "repeat the initial state at every time wanted" in line
+    fine = mx.Trajectories.from_list([(t[:21] * 2, swing[:21])], ("q", "p"))  # steps 0.1: 2x
+    assert not [w for w in time_unit_warning(units, fine) if "steps reach" in w]
+    assert not [w for w in time_unit_warning({k: v for k, v in units.items() if k != "step"},
+                                             two) if "steps reach" in w]  # an older run

@@ -685,3 +685,31 @@ def test_hdf5_stacked_states_at_the_root(tmp_path):
     assert len(mx.read(tmp_path / "bare.h5", dt=0.5)) == 2
     with pytest.raises(MetriplexError, match=r"holds `x` at its root and no times `t`: .*--dt"):
         mx.read(tmp_path / "bare.h5")
+
+
+def test_mat_layouts_a_matlab_user_writes_are_refused_with_the_permutation(tmp_path):
+    # A new-user check's natural files: K×T×n with a scalar dt was read as 201 variables of 3
+    # samples (train then asked for 6 GB); T×n×K with its time vector was told to pass --dt,
+    # which read it as 201 trajectories of the 8 states at one time; a cell array was told
+    # to rename it, which only moved the refusal.
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(8, 201, 3))
+    scipy.io.savemat(tmp_path / "ktn.mat", {"X": X, "dt": 0.05})
+    _raises(r"8×201×3 with times from a step alone.*201 variables and only 3 snapshots.*"
+            r"permute\(X, \[1 3 2\]\)", "MAT file", tmp_path / "ktn.mat")
+    scipy.io.savemat(tmp_path / "tn.mat", {"X": X[0], "dt": 0.05})
+    _raises(r"201×3 with times from a step alone.*Z = X\.'", "MAT file", tmp_path / "tn.mat")
+    scipy.io.savemat(tmp_path / "tnk.mat", {"X": X.transpose(1, 2, 0), "t": np.arange(201.0)})
+    _raises(r"has 201 entries, the first dimension .*snapshots × variables × trajectories.*"
+            r"permute\(X, \[3 2 1\]\)", "MAT file", tmp_path / "tnk.mat")
+    cell = np.empty((1, 8), dtype=object)
+    for k in range(8):
+        cell[0, k] = X[k]
+    scipy.io.savemat(tmp_path / "cell.mat", {"trajs": cell, "t": np.arange(201.0)})
+    _raises(r"`trajs` is a cell array, which is not read.*cat\(3, trajs\{:\}\)", "MAT file",
+            tmp_path / "cell.mat")
+    # The documented layout with a step, and K×T×n with its time vector, still read.
+    scipy.io.savemat(tmp_path / "knt.mat", {"Z": X.transpose(0, 2, 1), "dt": 0.05})
+    assert mx.read(tmp_path / "knt.mat").n == 3
+    scipy.io.savemat(tmp_path / "ktn_t.mat", {"X": X, "t": np.arange(201.0)})
+    assert mx.read(tmp_path / "ktn_t.mat").n == 3

@@ -60,8 +60,14 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
     # A time cap is not lifted by more steps; after a first stage, its budget is what was left.
     timed = train_summary(_history(3000, 3000, False, "time budget reached (15.2 s) at step "
                                    "3000"), metrics, 30.0, Path("run"), first_stage=True)
-    assert "--steps" not in timed and "allow more time (--max-minutes)" in timed
-    assert "(15.2 s: what the first stage left of --max-minutes) at step 3000" in timed
+    assert "--steps" not in timed
+    assert "continue it with --resume and a larger --max-minutes" in timed
+    assert ("(15.2 s: what the stages and trainings before it left of --max-minutes) at step "
+            "3000") in timed
+    # Capped with its best model earlier: still not converged, and said so (new-user check 17).
+    capped = train_summary(_history(2000, 3000, False, "time budget reached (15.2 s) at step "
+                                    "3000"), metrics, 30.0, Path("run"))
+    assert "; not converged: continue it with --resume and a larger --max-minutes" in capped
     assert "never trained" not in timed
     # An interrupted training wants --resume, not more steps (new-user check 15).
     cut = train_summary(_history(3000, 3000, False, "interrupted at step 3000"), metrics, 5.0,

@@ -254,6 +254,15 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
     rough = _reasons(v_noisy)["training_roughness"]
     assert v_noisy["outcome"] == CANNOT_TELL and rough["passed"] is False, v_noisy["statement"]
     assert rough["value"] > 2 and "train on data as clean as these" in v_noisy["statement"]
+    # A model trained on one trajectory is not refuted on others by a worse fit than the
+    # reference's (new-user check 17: one long trajectory of GENERIC data, judged on eight
+    # others inside its box, was "NOT consistent ... add the variable").
+    assert _reasons(v_in)["training_trajectories"]["passed"] is True
+    one = dataclasses.replace(mx.Units.from_data(pumped), trajectories=1)
+    v_one = verdict(model, pumped, report=report, reference=reference, trained_on=one)
+    single = _reasons(v_one)["training_trajectories"]
+    assert v_one["outcome"] == CANNOT_TELL and single["passed"] is False, v_one["statement"]
+    assert "trained on 1 trajectory: it learned the states along them" in v_one["statement"]
     d = np.std(pumped.x, axis=0)
     # A model trained on a narrow part of the states (one long trajectory of a new-user check,
     # "NOT consistent ... first law" on GENERIC data): these data stay within 6 of its standard

@@ -77,8 +77,11 @@ def checked_columns(trajectory: Any, t: Any, x: Any, names: Any
     for i, s, c in zip(ids, starts, counts):
         if c < 2:
             raise MetriplexError(
-                f"every trajectory needs at least two samples to form a training pair; "
-                f"trajectory {i} has {c}. Drop it or merge it with its neighbour."
+                f"every trajectory needs at least two samples: a training pair, or for "
+                f"rollout and evaluate the times to predict at; trajectory {i} has {c}. Drop "
+                f"it, or merge it with its neighbour; to predict from an initial state alone, "
+                f"repeat it at every time wanted (rollout reads only each trajectory's first "
+                f"state and its times)."
             )
         dt = np.diff(t[s : s + c])
         if np.any(dt <= 0):

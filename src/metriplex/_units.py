@@ -36,7 +36,11 @@ class Units:
     - ``pairs``: how many pairs of consecutive samples the data hold (``None`` where unknown),
       which the verdict compares with the pairs its reference trains on;
     - ``low``, ``high``: each variable's least and greatest value in the data (``None`` where
-      unknown), the extent beyond which judged data are extrapolation.
+      unknown), the extent beyond which judged data are extrapolation;
+    - ``step``: the data's largest time step (``None`` where unknown): a model rolled out with
+      much larger steps takes them in one step of its scheme each;
+    - ``trajectories``: how many trajectories the data hold (``None`` where unknown): a model
+      of one or two has seen as many curves of states, and elsewhere extrapolates.
 
     In these units a state is :math:`\tilde x = D^{-1}(x - c)`, time is :math:`t/\tau`, and
     :math:`E = \sigma_E\tilde E`, :math:`S = \sigma_S\tilde S`,
@@ -56,6 +60,8 @@ class Units:
     pairs: int | None = None
     low: tuple[float, ...] | None = None
     high: tuple[float, ...] | None = None
+    step: float | None = None
+    trajectories: int | None = None
 
     @classmethod
     def from_data(cls, data: "Trajectories", *, poisson: AbstractPoisson | None = None,
@@ -98,7 +104,8 @@ class Units:
                 entropy_scale = 1.0 / (tau * size)
         return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d),
                    len(data.t) - len(data.ids), tuple(map(float, np.min(data.x, axis=0))),
-                   tuple(map(float, np.max(data.x, axis=0))))
+                   tuple(map(float, np.max(data.x, axis=0))), _largest_step(data),
+                   len(data.ids))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
         """How far the states ``x`` (rows) reach from these units' data: the largest
@@ -175,6 +182,13 @@ class Units:
     def to_json(self) -> dict:
         """The units as a JSON-able dict of their fields."""
         return dataclasses.asdict(self)
+
+
+def _largest_step(data: "Trajectories") -> float | None:
+    """The largest time step between neighbouring samples of one trajectory of ``data``."""
+    same = data.trajectory[1:] == data.trajectory[:-1]
+    steps = np.diff(np.asarray(data.t, dtype=np.float64))[same]
+    return float(np.max(steps)) if steps.size else None
 
 
 def _rms_nonzero(a: np.ndarray) -> float | None:

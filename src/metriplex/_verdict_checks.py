@@ -23,7 +23,8 @@ CANNOT_TELL = "cannot tell"
 #: The checks whose failure leaves the evidence unsound (cannot tell whatever else fails), and
 #: those that are symptoms of a misfit as much as a lack of evidence (verdict's ``_outcome``).
 _EVIDENCE = {"held_out_pairs", "training_converged", "reference_residual", "training_range",
-             "training_coverage", "training_roughness", "training_pairs"}
+             "training_coverage", "training_roughness", "training_pairs",
+             "training_trajectories"}
 _SYMPTOMS = {"rollout_failures", "step_sensitivity"}
 
 

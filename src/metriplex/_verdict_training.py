@@ -31,7 +31,31 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool, t
     return _range_check(data, trained_on, th) + _coverage_check(
         data, trained_on, ratio_failed=misfit, th=th) + _roughness_check(
         data, trained_on, rel_gen, ratio_failed=misfit, th=th) + _pairs_check(
-        trained_on, reference_pairs, ratio_failed=misfit, th=th)
+        trained_on, reference_pairs, ratio_failed=misfit, th=th) + _trajectories_check(
+        trained_on, ratio_failed=misfit, th=th)
+
+
+def _trajectories_check(trained_on, *, ratio_failed: bool, th) -> list[dict[str, Any]]:
+    """``training_trajectories``, where the number of the model's training trajectories is
+    known (``trained_on.trajectories``): a model of one or two trajectories has learned the
+    curves of states they visit, which the per-variable range and coverage checks cannot tell
+    from the whole box (new-user check 17: one long trajectory of exactly GENERIC data, judged
+    on eight others inside its box, "NOT consistent ... add the variable"). Judged only where
+    the residual ratio failed."""
+    k = trained_on.trajectories
+    if k is None:
+        return []
+    if not ratio_failed:
+        passed, note = None, "not judged: the residual ratio passes"
+    else:
+        passed = k >= th.training_trajectories
+        note = (f"the model trained on {k} trajector{'y' if k == 1 else 'ies'}" + (
+            "" if passed else ": it learned the states along them, and from other initial "
+            "states it extrapolates, while the reference trains on these data, so its worse "
+            "fit is no evidence against GENERIC; train on more trajectories, from other "
+            "initial states, to decide"))
+    return [_reason("training_trajectories", k, th.training_trajectories, passed, CANNOT_TELL,
+                    note)]
 
 
 def _pairs_check(trained_on, reference_pairs: int | None, *, ratio_failed: bool,

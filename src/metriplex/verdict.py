@@ -66,6 +66,8 @@ name                       limit          meaning
 ``training_pairs``         0.5 (least)    failed residual ratio, ``trained_on``: the model
                                           trained on under half the pairs that the
                                           reference trains on here (cannot tell)
+``training_trajectories``  3 (least)      failed residual ratio, ``trained_on``: the model
+                                          trained on one or two trajectories (cannot tell)
 ``reference_residual``     0.3            the black box leaves more than 30% of the held-out
                                           rates (9% of their power) unexplained: too few
                                           trajectories to generalise from, noise, a coarse
@@ -150,7 +152,8 @@ A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
 Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
-``training_coverage``, ``training_roughness``, ``training_pairs`` or ``reference_residual``
+``training_coverage``, ``training_roughness``, ``training_pairs``,
+``training_trajectories`` or ``reference_residual``
 → **cannot tell**;
 else a failed ``residual_ratio`` → **not consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
@@ -230,6 +233,7 @@ class Thresholds:
     training_range: float = 6.0
     training_coverage: float = 0.05
     training_pairs: float = 0.5
+    training_trajectories: int = 3
     training_roughness: float = 2.0
     rollout_skill: float = 1.0
 

@@ -312,10 +312,13 @@ def simulate(
     ts: Float[Array, "*batch T"],
     *,
     scheme: AbstractScheme | None = None,
+    retry: int = RETRY_SUBSTEPS,
 ) -> Float[Array, "*batch T n"]:
     """Simulate ``model`` from ``x0`` on ``ts``; shape ``(T, n)`` or ``(batch, T, n)``.
 
-    Implicit Crank–Nicolson by default. The states of ``solve(..., throw=True)``: if a step
+    Implicit Crank–Nicolson by default. The states of ``solve(..., throw=True, retry=retry)``:
+    a step whose solve fails is retaken in ``retry`` substeps (and, where one of those fails,
+    in their square), as ``metriplex rollout`` and ``evaluate`` do (0: never); if it still
     does not converge this raises :class:`~metriplex.RolloutFailure` naming the trajectory and
     time, with the states computed up to there in ``.partial``; use :func:`solve` to get the
     marked result without raising.
@@ -324,7 +327,7 @@ def simulate(
     xs = mx.simulate(model, x0, jnp.linspace(0.0, 10.0, 101))
     ```
     """
-    return solve(model, x0, ts, scheme=scheme, throw=True).xs
+    return solve(model, x0, ts, scheme=scheme, throw=True, retry=retry).xs
 
 
 def _raise_first_failure(out: Rollout, scheme: AbstractScheme | None) -> None:

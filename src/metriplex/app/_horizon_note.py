@@ -1,10 +1,44 @@
-"""The note on how soon a model's rollouts from nearby states part (``evaluate``'s
-``predictability_time``, :func:`metriplex.diagnostics.initial_state_sensitivity`): beyond
-that time a whole-trajectory error measures the motion's sensitivity as much as the model."""
+"""What the time grid of the data a model is rolled out on means for its predictions: how
+soon its rollouts from nearby states part (``evaluate``'s ``predictability_time``,
+:func:`metriplex.diagnostics.initial_state_sensitivity`: beyond that time a whole-trajectory
+error measures the motion's sensitivity as much as the model), and steps far larger than the
+training data's (:func:`step_warning`)."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numpy as np
+
 from .._sensitivity import TWIN_APART, TWIN_OFFSET
+
+if TYPE_CHECKING:
+    from ..data import Trajectories
+
+#: Beyond this factor between the largest step of the data rolled out on and that of the
+#: training data, rollout and evaluate warn.
+STEP_FACTOR = 4.0
+
+
+def step_warning(units: dict, data: Trajectories) -> list[str]:
+    """A warning where ``data``'s largest step exceeds the training data's (``units``:
+    config.json's; ``step``) :data:`STEP_FACTOR`-fold: the model takes each interval of the
+    data in one step of its scheme (and retries in substeps only where a step fails), so a
+    grid coarser than it was trained on is a coarser prediction, not a shorter one (a
+    new-user check's initial states with one more sample at t = 10, 200 training steps away,
+    were predicted in one step each, with errors up to 7.6 and an entropy that fell, all
+    "ok")."""
+    trained = units.get("step")
+    same = data.trajectory[1:] == data.trajectory[:-1]
+    steps = np.diff(np.asarray(data.t, dtype=np.float64))[same]
+    if not trained or not steps.size or steps.max() <= STEP_FACTOR * float(trained):
+        return []
+    return [f"warning: these data's steps reach {steps.max():.3g}, {steps.max() / trained:.3g} "
+            f"times the training data's largest ({float(trained):.3g}): the model takes each "
+            "interval in one step of its scheme, so its predictions there are as coarse as "
+            "those steps. For a prediction at other times, give a grid as fine as the "
+            "training data's (rollout reads only each trajectory's first state and its times: "
+            "repeat the initial state at every time wanted)."]
 
 
 def predictability_note(metrics: dict) -> list[str]:

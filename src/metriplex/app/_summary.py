@@ -31,14 +31,18 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     ended = history.stopped or "completed"
     timed = ended.startswith("time budget")
     if timed and first_stage:  # the stage's budget is what the earlier ones left of the run's
-        ended = ended.replace(" s)", " s: what the first stage left of --max-minutes)", 1)
+        ended = ended.replace(" s)", " s: what the stages and trainings before it left of "
+                              "--max-minutes)", 1)
         if last == 0:
             ended += ("; the first stage took the whole budget, so the main stage (the "
                       "friction with it) never trained: allow more time (--max-minutes)")
+    more_time = "continue it with --resume and a larger --max-minutes (the whole run counts)"
     if not history.converged and history.best_step == last and last > 0:
         ended += ("; the best model is the last one: not converged, " + (
-            "continue it with --resume" if ended.startswith("interrupted") else "allow more "
-            + ("time (--max-minutes)" if timed else "--steps")))
+            "continue it with --resume" if ended.startswith("interrupted") else more_time
+            if timed else "allow more --steps"))
+    elif timed and not history.converged and last > 0:  # capped, its best model earlier
+        ended += f"; not converged: {more_time}"
     # Where --repeats trained from other initialisations already, another --seed is no advice.
     reseed = "other initialisations did no better" if trainings else "try another --seed"
     if history.best_step == 0 and last > 0:

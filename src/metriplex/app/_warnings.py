@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..verdict import Thresholds
-from ._horizon_note import predictability_note
+from ._horizon_note import predictability_note, step_warning
 
 if TYPE_CHECKING:
     from .._units import Units
@@ -235,7 +235,12 @@ def time_unit_warning(units: dict, data: Trajectories) -> list[str]:
     """A warning where ``data`` move on a time scale (:func:`metriplex.data.time_scale`) more
     than :data:`TIME_SCALE_FACTOR` times apart from that of the training data (``units``:
     config.json's ``units``): times in another unit (ms against s) give a model steps it was
-    never trained on, and every figure then says so only as a large error."""
+    never trained on, and every figure then says so only as a large error; and
+    :func:`~metriplex.app._horizon_note.step_warning`, on steps far larger than training's."""
+    return _time_scale_warning(units, data) + step_warning(units, data)
+
+
+def _time_scale_warning(units: dict, data: Trajectories) -> list[str]:
     from ..data import time_scale
 
     trained = units.get("time")

@@ -209,14 +209,22 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
         return (*_mat_long_table(scope, where, dt), names)
     key = _pick(scope, STATE_KEYS, states, "the state array", where, "states")
     if key is None:
+        cells = [k for k, v in scope.items() if getattr(v, "dtype", None) == object]
+        fix = ("Rename the variable (MATLAB: Z = NAME; save(file, 'Z', 't')) or, in Python, "
+               "pass read_mat(path, states='NAME')")
+        if cells:  # renaming a cell array only moves the refusal
+            fix = (f"`{cells[0]}` is a cell array, which is not read: stack it into one numeric "
+                   "trajectories × variables × snapshots array (MATLAB, for cells of snapshots "
+                   f"× variables: Z = permute(cat(3, {cells[0]}{{:}}), [3 2 1]); save(file, 'Z', "
+                   "'t'))")
         raise MetriplexError(
             f"{where} holds no state array: expected a trajectories × variables × snapshots "
             f"array named one of {', '.join(STATE_KEYS)} (or the long table `trajectory`, `t`, "
-            f"`x`); it holds {_found(scope)}. Rename the variable (MATLAB: Z = NAME; save(file, "
-            "'Z', 't')) or, in Python, pass read_mat(path, states='NAME')."
+            f"`x`); it holds {_found(scope)}. {fix}."
         )
     Z = _real(scope[key], f"state array `{key}`", where)
-    if Z.ndim == 2:
+    one = Z.ndim == 2
+    if one:
         Z = Z[None]
     if Z.ndim != 3:
         raise MetriplexError(
@@ -225,6 +233,22 @@ def _mat_table(scope: dict, where: str, *, states, time, dt):
         )
     if _snapshots_first(scope, Z, time=time, dt=dt):
         Z = Z.transpose(0, 2, 1)
+    elif Z.shape[1] > Z.shape[2] > 1 and (dt is not None
+                                          or not any(k in scope for k in TIME_KEYS)):
+        # Times from a step alone cannot tell the layouts apart, and more variables than
+        # snapshots is what trajectories × snapshots × variables gives when read as documented
+        # (a new-user check: 201 "variables" of 3 samples, and train then asked for 6 GB).
+        K, a, b = Z.shape
+        shape, layout, fix = ((f"{a}×{b}", "variables × snapshots", f"Z = {key}.'") if one else
+                              (f"{K}×{a}×{b}", "trajectories × variables × snapshots",
+                               f"Z = permute({key}, [1 3 2])"))
+        raise MetriplexError(
+            f"state array `{key}` in {where} is {shape} with times from a step alone: read as "
+            f"{layout} it has {a} variables and only {b} snapshots, which is what the other "
+            f"order (snapshots before variables) looks like. Store it as {layout} (MATLAB: "
+            f"{fix}), or add a time vector `t` of its snapshots (then its length tells the "
+            "layouts apart)."
+        )
     K, n, T = Z.shape
     t = _mat_times(scope, where, key, Z.shape, time=time, dt=dt)
     ids = np.arange(K, dtype=np.float64)
@@ -306,6 +330,16 @@ def _mat_times(scope, where, key, shape, *, time, dt):
         t = np.broadcast_to(tv.reshape(1, T), (K, T))
     elif tv.shape == (K, T):
         t = tv
+    elif tv.size == K and K != T and sum(s != 1 for s in tv.shape) <= 1:
+        # The stack of ode45 outputs, X(:, :, k) = [q p s]: snapshots × variables ×
+        # trajectories. --dt would read it as K trajectories of the K states at one time.
+        raise MetriplexError(
+            f"time vector `{t_key}` in {where} has {tv.size} entries, the first dimension of "
+            f"state array `{key}` ({K}×{n}×{T}): it seems stored snapshots × variables × "
+            f"trajectories (MATLAB's X(:, :, k) = [...] for trajectory k). Store it as "
+            f"trajectories × variables × snapshots (MATLAB: Z = permute({key}, [3 2 1]); "
+            "save(file, 'Z', 't'))."
+        )
     else:
         raise MetriplexError(
             f"time vector `{t_key}` in {where} is {_shape(tv)}; state array `{key}` "

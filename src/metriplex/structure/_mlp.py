@@ -156,10 +156,13 @@ def signed_rows(n: int, triangle: str) -> tuple[np.ndarray, np.ndarray]:
     """``(rows, sign)`` with ``P == sign[:, None] * onehot(rows)`` for the assembly ``P`` of
     ``triangle`` (``"skew"`` or ``"lower"``): the one output each flat matrix entry takes, and
     its sign (0 for an entry that takes none, e.g. the skew diagonal)."""
-    P = skew_assembly(n) if triangle == "skew" else lower_assembly(n)
-    rows = np.argmax(np.abs(P), axis=1)
-    sign = P[np.arange(P.shape[0]), rows]
-    return rows, sign
+    # From the triangle's indices, never the dense (n^2, m) assembly: 6 GB at n = 201.
+    rows, sign = np.zeros((n, n), dtype=np.int64), np.zeros((n, n))
+    i, j = np.triu_indices(n, k=1) if triangle == "skew" else np.tril_indices(n)
+    rows[i, j], sign[i, j] = np.arange(len(i)), 1.0
+    if triangle == "skew":
+        rows[j, i], sign[j, i] = np.arange(len(i)), -1.0
+    return rows.reshape(-1), sign.reshape(-1)
 
 
 class FoldedHead(eqx.Module):
@@ -179,14 +182,11 @@ class FoldedHead(eqx.Module):
                  init_scale: float, *, key: jax.Array) -> None:
         self.n = n
         self.triangle = triangle
-        m = self._assembly().shape[1]
+        m = n * (n - 1) // 2 if triangle == "skew" else n * (n + 1) // 2
         lim = init_scale / np.sqrt(width)
         self.weight = jr.uniform(key, (m, width), minval=-lim, maxval=lim)
         self.bias = jnp.zeros((m,))
         self.row_scale = None if row_scale is None else tuple(float(v) for v in row_scale)
-
-    def _assembly(self) -> np.ndarray:
-        return skew_assembly(self.n) if self.triangle == "skew" else lower_assembly(self.n)
 
     def __call__(self, h: jax.Array) -> Matrix:
         rows, sign = signed_rows(self.n, self.triangle)
