@@ -57,6 +57,12 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                           metrics, 5.0, Path("run"))
     assert "not converged, allow more --steps" in line
     assert "rollout error on validation trajectories: 1.000e-02" in line
+    # How long they run, with the error (new-user check 17: 5.5e-4 over trajectories of 0.5
+    # time units, 30x under the error over 10 on unseen initial states, with nothing said).
+    assert "over each whole trajectory, mean of 4" in line  # unknown: not said
+    short = train_summary(_history(3000, 3000, False, "step budget reached (3000 steps)"),
+                          {**metrics, "duration_median": 0.5}, 5.0, Path("run"))
+    assert "over each whole trajectory, each 0.5 time units long (median), mean of 4" in short
     # A time cap is not lifted by more steps; after a first stage, its budget is what was left.
     timed = train_summary(_history(3000, 3000, False, "time budget reached (15.2 s) at step "
                                    "3000"), metrics, 30.0, Path("run"), first_stage=True)

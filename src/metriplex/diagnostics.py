@@ -249,6 +249,9 @@ def evaluate(
     no_steps = f"no rollout ran two steps ({failures})"
     report: dict[str, Any] = {
         "trajectories": int(len(lengths)),
+        # How long the trajectories run (median): an error over a short one says less.
+        "duration_median": float(np.median([ts[k, T - 1] - ts[k, 0]
+                                            for k, T in enumerate(lengths)])),
         # The data's ids, in the order of every per-trajectory list below.
         "trajectory_ids": [int(i) for i in data.ids],
         "variables": list(data.names),

@@ -71,8 +71,10 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
         if done is not None:
             rollouts += f"; error of the {k - failed} completed: {done:.3e}"
     else:
+        span = metrics.get("duration_median")
         rollouts = (f"rollout error on {where}: {err:.3e} (relative L2 over each whole "
-                    f"trajectory, mean of {k}")
+                    "trajectory" + ("" if span is None else f", each {span:.3g} time units "
+                                    "long (median)") + f", mean of {k}")
         std = metrics.get("rollout_error_standardised_mean")
         rollouts += ")" if std is None else (f"; {std:.3e} in standard deviations about the "
                                             "data's mean, which no offset shrinks)")
