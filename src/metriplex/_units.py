@@ -104,7 +104,7 @@ class Units:
                 entropy_scale = 1.0 / (tau * size)
         return cls(shift, scale, tau, float(energy), float(entropy_scale), roughness(data, d),
                    len(data.t) - len(data.ids), tuple(map(float, np.min(data.x, axis=0))),
-                   tuple(map(float, np.max(data.x, axis=0))), _largest_step(data),
+                   tuple(map(float, np.max(data.x, axis=0))), largest_step(data),
                    len(data.ids))
 
     def farthest(self, x: np.ndarray) -> tuple[float, int, int]:
@@ -184,7 +184,7 @@ class Units:
         return dataclasses.asdict(self)
 
 
-def _largest_step(data: "Trajectories") -> float | None:
+def largest_step(data: "Trajectories") -> float | None:
     """The largest time step between neighbouring samples of one trajectory of ``data``."""
     same = data.trajectory[1:] == data.trajectory[:-1]
     steps = np.diff(np.asarray(data.t, dtype=np.float64))[same]

@@ -8,8 +8,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from .._sensitivity import TWIN_APART, TWIN_OFFSET
 
 if TYPE_CHECKING:
@@ -28,12 +26,12 @@ def step_warning(units: dict, data: Trajectories) -> list[str]:
     new-user check's initial states with one more sample at t = 10, 200 training steps away,
     were predicted in one step each, with errors up to 7.6 and an entropy that fell, all
     "ok")."""
-    trained = units.get("step")
-    same = data.trajectory[1:] == data.trajectory[:-1]
-    steps = np.diff(np.asarray(data.t, dtype=np.float64))[same]
-    if not trained or not steps.size or steps.max() <= STEP_FACTOR * float(trained):
+    from .._units import largest_step
+
+    trained, top = units.get("step"), largest_step(data)
+    if not trained or top is None or top <= STEP_FACTOR * float(trained):
         return []
-    return [f"warning: these data's steps reach {steps.max():.3g}, {steps.max() / trained:.3g} "
+    return [f"warning: these data's steps reach {top:.3g}, {top / trained:.3g} "
             f"times the training data's largest ({float(trained):.3g}): the model takes each "
             "interval in one step of its scheme, so its predictions there are as coarse as "
             "those steps. For a prediction at other times, give a grid as fine as the "
