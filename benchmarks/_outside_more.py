@@ -11,6 +11,9 @@ six of ``outside_zoo.py`` were run and used for nothing else:
 - **tidal-orbit** (n = 5): a planar orbit in a softened central potential (km, s,
   mu = 3.986e5 km^3/s^2), whose radial velocity is damped by a friction that heats one body:
   the orbit circularises at constant angular momentum.
+- **oscillator-network** (n = 14; added 2026-12-07 from new-user check 17, whose defaults
+  gave 0.28 on it): six hardening oscillators with all-to-all random couplings, two of them
+  damped, each heating its own bath; no cell structure.
 
 Each parameter, step, number of steps and of trajectories was chosen from the true
 trajectories only (periods, relaxation times, boundedness), before any training.
@@ -191,3 +194,67 @@ class TidalOrbit(BoxSampling, System):
     def _build_model(self):
         return analytic_model(self.config, energy=_tidal_orbit_energy, entropy=SumOf((4,)),
                               poisson=CanonicalPoisson(5, 2), friction=_tidal_orbit_friction)
+
+
+# -- six coupled oscillators, two baths -----------------------------------------------------------
+def _network_couplings(n: int = 6, scale: float = 0.15, seed: int = 123) -> tuple[float, ...]:
+    """A fixed random symmetric coupling matrix (zero diagonal), flattened row by row."""
+    import numpy as np
+
+    k = np.abs(np.random.default_rng(seed).normal(0.0, scale, (n, n)))
+    k = np.triu(k, 1)
+    return tuple(float(v) for v in (k + k.T).ravel())
+
+
+@dataclasses.dataclass(frozen=True)
+class OscillatorNetworkConfig:
+    """State (q1..q6, p1..p6, s1, s2), unit masses; oscillators 1 and 2 are damped, each
+    heating its own bath.
+
+    E = sum_i (p_i^2 + w_i^2 q_i^2) / 2 + q_i^4 / 4 + sum_{i<j} K_ij (q_i - q_j)^2 / 2
+    + sum_b c theta0 (exp(s_b / c) - 1), so theta_b = theta0 exp(s_b / c); S = s1 + s2;
+    L canonical in (q, p); M = sum_b (g_b / theta_b) w_b w_b^T, w_b = theta_b e_{p_b} -
+    p_b e_{s_b}: p_b' gains -g_b p_b and s_b' = g_b p_b^2 / theta_b.
+    """
+
+    frequencies_squared: tuple[float, ...] = (1.0, 1.06, 1.12, 1.18, 1.24, 1.3)
+    couplings: tuple[float, ...] = _network_couplings()
+    damping: tuple[float, float] = (0.3, 0.25)
+    heat_capacity: float = 1.0
+    theta0: float = 1.0
+    x0_center: tuple[float, ...] = (0.0,) * 14
+    x0_halfwidth: tuple[float, ...] = (1.0,) * 12 + (0.2, 0.2)
+
+
+def _network_energy(c: OscillatorNetworkConfig, x):
+    q, p, s = x[0:6], x[6:12], x[12:14]
+    w2 = jnp.asarray(c.frequencies_squared, x.dtype)
+    K = jnp.asarray(c.couplings, x.dtype).reshape(6, 6)
+    d = q[:, None] - q[None, :]
+    return (jnp.sum(p**2 + w2 * q**2) / 2 + jnp.sum(q**4) / 4 + jnp.sum(K * d**2) / 4
+            + jnp.sum(bath_energy(s, c.heat_capacity, c.theta0)))
+
+
+def _network_friction(c: OscillatorNetworkConfig, x):
+    theta = bath_temperature(x[12:14], c.heat_capacity, c.theta0)
+    M = jnp.zeros((14, 14), x.dtype)
+    for b in range(2):
+        w = jnp.zeros(14, x.dtype).at[6 + b].set(theta[b]).at[12 + b].set(-x[6 + b])
+        M = M + (c.damping[b] / theta[b]) * jnp.outer(w, w)
+    return M
+
+
+@dataclasses.dataclass(frozen=True)
+class OscillatorNetwork(BoxSampling, System):
+    name = "oscillator-network"
+    description = ("Six hardening oscillators, random all-to-all couplings; two damped, each "
+                   "heating its own bath: canonical L in (q, p), S = s1 + s2.")
+    names = tuple(f"q{i}" for i in range(1, 7)) + tuple(f"p{i}" for i in range(1, 7)) + (
+        "s1", "s2")
+    defaults = case_settings(dt=0.05, steps=200, trajectories=40)
+    max_substep = 0.005
+    config: OscillatorNetworkConfig = OscillatorNetworkConfig()
+
+    def _build_model(self):
+        return analytic_model(self.config, energy=_network_energy, entropy=SumOf((12, 13)),
+                              poisson=CanonicalPoisson(14, 6), friction=_network_friction)

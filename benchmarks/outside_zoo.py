@@ -1,6 +1,6 @@
 """Defaults checked on systems outside the zoo: none of them was used to choose a default.
 
-    .venv/bin/python benchmarks/outside_zoo.py                       # all nine, one by one
+    .venv/bin/python benchmarks/outside_zoo.py                       # all ten, one by one
     .venv/bin/python benchmarks/outside_zoo.py --cases point-vortices --out rows.json
 
 Each case is trained as `benchmarks/zoo.py` trains a zoo case (`zoo.run_case`: the structure
@@ -29,6 +29,8 @@ error the step itself makes:
   added after the six above were run): two coupled oscillators each heating its own bath, the
   baths conducting (seconds, periods of 10-25 ms); a pendulum on a sliding cart (cart near
   x = 120 m); an orbit in a softened potential (km, s) circularised by radial friction.
+- **oscillator-network** (n = 14, in `_outside_more.py`; added 2026-12-07 from a new-user
+  check): six hardening oscillators, random all-to-all couplings, two damped into own baths.
 
 Results: docs/zoo.md, *Outside the zoo*.
 """
@@ -56,7 +58,7 @@ from metriplex.systems._base import BoxSampling, System, analytic_model  # noqa:
 from metriplex.systems.zoo import ZooCase  # noqa: E402
 from metriplex.systems.zoo._case import case_settings  # noqa: E402
 from metriplex.systems.zoo._parts import bath_energy, bath_temperature  # noqa: E402
-from _outside_more import CartPendulum, TidalOrbit, TwoBaths  # noqa: E402
+from _outside_more import CartPendulum, OscillatorNetwork, TidalOrbit, TwoBaths  # noqa: E402
 
 
 # -- a double well whose friction heats a bath ---------------------------------------------------
@@ -345,6 +347,7 @@ CASES = {c.name: c for c in (
     ZooCase.of(TwoBaths(), {"poisson": "canonical:2", "entropy": "sum:4,5"}),
     ZooCase.of(CartPendulum(), {"poisson": "canonical:2", "entropy": "zero", "friction": "zero"}),
     ZooCase.of(TidalOrbit(), {"poisson": "canonical:2", "entropy": "sum:4"}),
+    ZooCase.of(OscillatorNetwork(), {"poisson": "canonical:6", "entropy": "sum:12,13"}),
 )}
 
 
