@@ -57,8 +57,7 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
     """
     scheme = CrankNicolson() if scheme is None else scheme
     ts, xs, lengths = data.padded()
-    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
-                     .astype(int))
+    pick = _spread(len(lengths), trajectories)
     w = int(min(steps + 1, np.min(lengths[pick])))
     if w < 2:
         return None, "no trajectory has two states"
@@ -89,6 +88,11 @@ def step_sensitivity(model: GenericModel, data: Trajectories, *,
     if not np.isfinite(num) or den <= _TINY:
         return None, "the refined rollouts do not move from their first states"
     return num / den, (f"{int(ok.sum())} trajectories, {w - 1} steps, step refined {refine}x")
+
+
+def _spread(count: int, most: int) -> np.ndarray:
+    """The indices of up to ``most`` of ``count`` trajectories, evenly spread over them."""
+    return np.unique(np.linspace(0, count - 1, min(most, count)).astype(int))
 
 
 def _refined_rollout(model, scheme, x0, fine, w):
@@ -149,8 +153,7 @@ def initial_state_sensitivity(model: GenericModel, data: Trajectories, *,
     scheme = CrankNicolson() if scheme is None else scheme
     keys = ("twin_growth", "predictability_time")
     ts, xs, lengths = data.padded()
-    pick = np.unique(np.linspace(0, len(lengths) - 1, min(trajectories, len(lengths)))
-                     .astype(int))
+    pick = _spread(len(lengths), trajectories)
     dtype = float_dtype(model)
     if rollout is None:
         base = np.asarray(solve(model, jnp.asarray(xs[pick, 0], dtype), ts[pick], scheme=scheme,

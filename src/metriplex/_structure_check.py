@@ -267,8 +267,8 @@ def identified(model: GenericModel) -> dict[str, Any]:
     any :math:`F(E)` satisfies. A learned S is fixed only up to an increasing :math:`G(S)`
     (:math:`L\nabla G(S) = 0` still, and :math:`M/G'` keeps :math:`M\nabla S`), so
     :math:`\partial E/\partial S` is not determined; with :math:`L = 0` up to :math:`G(S, E)`
-    increasing in S (:math:`M\nabla E = 0` absorbs :math:`\partial G/\partial E`). These are properties of the structure,
-    not of a training: no amount of data fixes them."""
+    increasing in S (:math:`M\nabla E = 0` absorbs :math:`\partial G/\partial E`). These are
+    properties of the structure, not of a training: no amount of data fixes them."""
     learned = [k for k, block in (("E", model.energy), ("S", model.entropy),
                                   ("L", model.poisson), ("M", model.friction)) if weights(block)]
     if isinstance(model.poisson, ZeroPoisson):

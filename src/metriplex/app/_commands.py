@@ -355,18 +355,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     for line in structure_warnings(metrics):
         print(line, file=sys.stderr)
     if not args.no_verdict:
-        from .runs import training_outcome
-        from ..verdict import verdict
+        from .runs import run_verdict
 
-        cfg = run.get("config", {})
-        ended = training_outcome(args.run)
-        metrics["verdict"] = verdict(
-            model, data, report=metrics, converged=ended["converged"], stopped=ended["stopped"],
-            width=cfg.get("width", 64), depth=cfg.get("depth", 2),
-            steps=args.verdict_steps, learning_rate=cfg.get("lr", 1e-2),
-            batch_size=cfg.get("batch_size", 256), progress=not args.quiet,
-            trained_on=trained_units(units),
-        )
+        metrics["verdict"] = run_verdict(args.run, model, data, metrics,
+                                         steps=args.verdict_steps, progress=not args.quiet)
         print(f"verdict: {metrics['verdict']['statement']}", file=sys.stderr)
     if args.out:
         write_json(Path(args.out), metrics)

@@ -278,6 +278,24 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     return model, history, given_train, valid, seconds
 
 
+def run_verdict(run_dir: str | Path, model: Any, data: Trajectories, report: dict, *,
+                steps: int = 3000, progress: bool = False) -> dict:
+    """``metriplex evaluate``'s verdict on ``data`` of the model of the run in ``run_dir``
+    (``report``: its :func:`~metriplex.evaluate` on them): how its training ended, its
+    training data's units, and a black-box reference of ``steps`` steps trained with the
+    run's width, depth, learning rate and batch size, so that both give the same figures."""
+    from ..verdict import verdict
+    from ._warnings import trained_units
+
+    run = run_config(run_dir)
+    cfg, ended = run.get("config", {}), training_outcome(run_dir)
+    return verdict(model, data, report=report, converged=ended["converged"],
+                   stopped=ended["stopped"], width=cfg.get("width", 64),
+                   depth=cfg.get("depth", 2), steps=steps, learning_rate=cfg.get("lr", 1e-2),
+                   batch_size=cfg.get("batch_size", 256), progress=progress,
+                   trained_on=trained_units(run.get("units") or {}))
+
+
 def trained_scheme(saved: dict) -> str:
     """The scheme a run trained with (``saved``: its config.json): given, else its data's."""
     given, decided = saved.get("config") or {}, saved.get("decided") or {}

@@ -40,7 +40,7 @@ from ...io import write, write_json
 from .._warnings import structure_warnings
 from .._report import Truth, report_figures
 from ..._structure_check import _terms_at
-from ..runs import run_config, train_run, trained_scheme
+from ..runs import run_config, run_verdict, train_run, trained_scheme
 
 
 def _check_name(name: str) -> Experiment:
@@ -179,7 +179,7 @@ def run_experiment(
         for k, v in exp.bars.items()
     }
     if verdict:
-        metrics["verdict"] = _verdict(model, test, metrics, out, progress)
+        metrics["verdict"] = run_verdict(out, model, test, metrics, progress=progress)
     write_json(out / "metrics.json", metrics)
     key = "rollout_error_to_horizon_mean" if horizon else "rollout_error_mean"
     still = metrics[key.replace("rollout_error", "constant_prediction_error")]
@@ -211,22 +211,6 @@ def run_experiment(
         print(f"  no verdict for a quick run (its training is a step budget); run without "
               f"--quick, or: metriplex evaluate {out} {out / 'test_data.npz'}")
     return metrics
-
-
-def _verdict(model, test, metrics: dict[str, Any], out: Path, progress: bool) -> dict[str, Any]:
-    """``metriplex evaluate``'s verdict of the run in ``out`` on the test data ``test``, whose
-    report ``metrics`` is: the reference trained as evaluate trains it for that run."""
-    from ...verdict import verdict
-    from .._warnings import trained_units
-    from ..runs import training_outcome
-
-    run = run_config(out)
-    cfg, ended = run.get("config", {}), training_outcome(out)
-    return verdict(model, test, report=metrics, converged=ended["converged"],
-                   stopped=ended["stopped"], width=cfg.get("width", 64),
-                   depth=cfg.get("depth", 2), learning_rate=cfg.get("lr", 1e-2),
-                   batch_size=cfg.get("batch_size", 256), progress=progress,
-                   trained_on=trained_units(run.get("units") or {}))
 
 
 def _met(key, value, target, rounding=None):
