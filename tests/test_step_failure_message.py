@@ -30,3 +30,24 @@ def test_a_root_finder_outside_the_registry_is_named_by_its_class():
     assert "--solver newton" in message
     with pytest.raises(TypeError):
         mx.AbstractRootFinder()
+
+
+def test_python_callers_are_told_python_arguments_not_command_line_options():
+    message = step_failure(mx.CrankNicolson(), 1.0, 1.5, python=True)
+    assert "scheme=CrankNicolson(root_finder=Newton())" in message
+    assert "scheme=RK4()" in message
+    assert "--" not in message
+
+
+def test_simulate_names_python_arguments_when_a_rollout_fails():
+    import jax.numpy as jnp
+
+    from metriplex.structure import CanonicalPoisson, Known, ZeroFriction, ZeroPotential
+
+    # dq/dt = p, dp/dt = q^3: blows up in finite time (at t = sqrt(2) / q0 = 0.47 from q0 = 3).
+    model = mx.GenericModel(Known(lambda x: x[1] ** 2 / 2 - x[0] ** 4 / 4), ZeroPotential(),
+                            CanonicalPoisson(2, 1), ZeroFriction(2))
+    with pytest.raises(mx.RolloutFailure) as info:
+        mx.simulate(model, jnp.array([3.0, 3.0 ** 2 / 2 ** 0.5]), jnp.linspace(0.0, 2.0, 21),
+                    retry=0)
+    assert "--solver" not in str(info.value) and "--scheme" not in str(info.value)

@@ -159,20 +159,24 @@ def _rollout_one(model, scheme, x0, ts, retry):
 _rollout_batch = eqx.filter_jit(_rollout)
 
 
-def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "") -> str:
+def step_failure(scheme: AbstractScheme, t0: float, t1: float, where: str = "", *,
+                 python: bool = False) -> str:
     """What went wrong in a failed step from ``t0`` to ``t1`` (``where``, e.g. " of trajectory
     3", follows the times), and what to try, in the words of ``scheme``: an implicit step's
     solve did not converge; an explicit step (RK4) has nothing to converge, its new state was
-    not finite."""
+    not finite. ``python``: name the fixes as Python arguments, not command-line options."""
     name = scheme.name
     span = f"from t={t0:.6g} to t={t1:.6g}{where}"
     if isinstance(scheme, AbstractImplicitScheme):
         solver = _solver_name(scheme.root_finder)
         newton = ("" if isinstance(scheme.root_finder, Newton)
-                  else "the Newton solver (--solver newton), ")
+                  else "the Newton solver ("
+                  + (f"scheme={type(scheme).__name__}(root_finder=Newton())" if python
+                     else "--solver newton") + "), ")
+        rk4 = "scheme=RK4()" if python else "--scheme rk4"
         return (
             f"the implicit {name} step {span} did not converge (solver {solver!r}). Try "
-            f"{newton}a smaller time step, or RK4 (--scheme rk4) to see whether the model "
+            f"{newton}a smaller time step, or RK4 ({rk4}) to see whether the model "
             "itself blows up"
         )
     return (
@@ -340,7 +344,8 @@ def _raise_first_failure(out: Rollout, scheme: AbstractScheme | None) -> None:
         ts_b = np.asarray(out.ts).reshape(-1, np.asarray(out.ts).shape[-1])[b]
         xs_b = np.asarray(out.xs).reshape(-1, *np.asarray(out.xs).shape[-2:])[b]
         what = step_failure(CrankNicolson() if scheme is None else scheme,
-                            float(ts_b[k - 1]), float(ts_b[k]), f" of trajectory {b}")
+                            float(ts_b[k - 1]), float(ts_b[k]), f" of trajectory {b}",
+                            python=True)
         raise RolloutFailure(
             f"step {k}: {what}. The {k} states computed before it are in .partial.",
             partial=xs_b[:k],
