@@ -70,7 +70,7 @@ def test_run_folder_contents(oscillator_run):
                               "starts": 1, "residual_metric": "correlated",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
-                              "patience": 20, "repeats": 3, "every": 1, "scheme": "cn",
+                              "patience": 20, "repeats": 4, "every": 1, "scheme": "cn",
                               "coarse_steps": None}
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
     assert not (run_dir / ".metriplex.lock").exists()
@@ -106,6 +106,9 @@ def test_rollout_and_evaluate(oscillator_run, tmp_path):
     assert res.returncode == 0, res.stderr
     m = json.loads((tmp / "metrics.json").read_text())
     assert m["every"] == 2  # every second sample (the verdict's way round noise)
+    assert "--every 2: the rollouts step 2 samples at a time" in res.stderr
+    assert 0 <= m["noise_over_spread"] < 0.005  # clean data: no note on noise
+    assert "carry noise" not in res.stderr
     for key in ("rollout_error", "rollout_error_mean", "energy_relative_drift", "entropy_min_step",
                 "degeneracy_L_gradS", "degeneracy_M_gradE", "jacobi_residual", "verdict"):
         assert key in m, key

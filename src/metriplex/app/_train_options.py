@@ -86,7 +86,10 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
     w.add_argument("--repeats", type=int, metavar="K", help="train again from another "
                    "initialisation while the held-out rollouts of the best model so far err by "
                    f"more than {GOOD_SCORE} of the data's spread or fail, up to K trainings in "
-                   f"all; the best is kept (default: {REPEATS}; 1 without held-out trajectories)")
+                   f"all; the best is kept; the last of three where L = 0 learns --friction "
+                   f"exchange, the last of four --quadratic (default: {REPEATS}, and a fourth "
+                   "with --quadratic where E is the default network and the third does not "
+                   "learn the exchange; 1 without held-out trajectories)")
     w.add_argument("--confine", action=argparse.BooleanOptionalAction, default=None,
                    help="add a wall to the learned E, zero on the training data's box widened "
                    "by one standard deviation (three where S is learned) and quartic outside "

@@ -197,7 +197,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     train = given_train.interleaved(spacing)
     model_key, fit_key = jr.split(jr.key(config.seed))
     given = Given.of(config, train.n)  # a file: L or M read once
-    units = units_for(config, train, given)
+    # The trajectories recorded, not the interleaved copies that pair noisy samples further
+    # apart: one trajectory stays one (the verdict's training_trajectories check).
+    units = dataclasses.replace(units_for(config, train, given),
+                                trajectories=len(given_train.ids))
     free, said = casimir_variables(config, given.poisson), io.StringIO()
     constant = constant_variables(config, train, note=said)
     # Built before anything is written: a structure the data cannot take is refused first.
@@ -258,10 +261,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         keep(e.model, e.history)
         raise
     if len(outcomes) > 1:
-        kept = one.config_of(chosen)  # its friction can be another (config_for)
+        kept = one.config_of(chosen)  # its friction or E's form can be another (config_for)
         if kept is not config:
             header["decided"] = {**header["decided"], "friction": kept.friction,
-                                 **decisions(kept)}
+                                 "quadratic": kept.quadratic, **decisions(kept)}
             header["loss_terms"] = list(build_loss(kept, units, train).names)
         write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
                                          "kept_training": chosen})
