@@ -202,3 +202,21 @@ def test_an_angle_stored_modulo_a_turn_is_named_with_the_fix():
         stiff.x[:20, 0]))) > np.pi  # a turn's range, and a fall of more than half a turn
     assert wrapped_angle_warning(stiff) == []
     assert wrapped_angle_warning(_rotating(lambda q: 3.0 * np.sin(q))) == []
+
+
+def test_an_entropy_named_as_a_temperature_is_warned_about():
+    # A new-user check gave --entropy sum:2 on a column named theta: trained without a word,
+    # and its report drew "temperatures dE/d(theta) = 1" as determined by the data.
+    from metriplex.app._data_checks import data_notes, temperature_named_warning
+
+    (line,) = temperature_named_warning(("q", "p", "theta"), "sum:2")
+    assert "theta (column 2)" in line and "leave --entropy out" in line
+    assert len(temperature_named_warning(("q", "p", "T1", "T_2"), "sum:2,3")[0].split("column")) == 3
+    for names, entropy in ((("q", "p", "s"), "sum:2"), (("q", "theta", "s"), "sum:2"),
+                           (("q", "p", "theta"), "neural"), (("q", "p", "tempo"), "sum:2")):
+        assert temperature_named_warning(names, entropy) == []
+    data = mx.Trajectories.from_list(
+        [(np.arange(5.0), np.c_[np.cos(np.arange(5.0) + j), np.sin(np.arange(5.0) + j),
+                                1.0 + 0.1 * np.arange(5.0)]) for j in range(3)],
+        ("q", "p", "theta"))
+    assert any("named as a temperature" in w for w in data_notes(data, None, "sum:2"))

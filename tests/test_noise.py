@@ -116,6 +116,9 @@ def test_train_pairs_noisy_samples_further_apart_and_records_the_spacing(tmp_pat
     assert 4.0 < float(re.search(r"the noise is about ([0-9.]+)% of a variable", err)[1]) < 6.0
     # The split is of the file's trajectories; the roughness recorded is of the pairs trained on.
     assert header["train_trajectories"] == [0, 1, 2, 3]
+    # ... and so is the count that the verdict's training_trajectories check reads: four
+    # recorded, not 4k interleaved (a new-user check's one trajectory passed it as 12).
+    assert header["units"]["trajectories"] == 4
     from metriplex.data import roughness
     train = data.select([0, 1, 2, 3])
     assert header["units"]["roughness"] == pytest.approx(
@@ -269,3 +272,15 @@ def test_uneven_steps_count_by_their_duration_so_long_steps_among_short_ones_rea
     uneven = circles(np.concatenate([[0.0], np.cumsum(np.tile([0.01] * 9 + [0.6], 20))]))
     assert by_pairs(uneven) < COARSE_STEPS < roughness(uneven)
     assert coarse_steps(uneven) == roughness(uneven)
+
+
+def test_evaluate_says_its_errors_include_the_noise_of_the_states_it_judges():
+    # A new-user check read evaluate's 0.063 at 5 % noise as the model's error; against the
+    # clean truth from the same initial states it was 0.034. train's final line said so of its
+    # held-out error; evaluate now does too.
+    from metriplex.app._summary import NOTED_NOISE, evaluated_noise_note
+
+    assert evaluated_noise_note({}) == []
+    assert evaluated_noise_note({"noise_over_spread": NOTED_NOISE / 2}) == []
+    (line,) = evaluated_noise_note({"noise_over_spread": 0.05})
+    assert "about 5.0% of a variable's" in line and "noise included" in line

@@ -582,6 +582,12 @@ def test_a_time_step_that_decides_the_prediction_gives_cannot_tell():
     r = _reasons(v)["step_sensitivity"]
     assert r["passed"] is False and r["value"] == pytest.approx(report["step_sensitivity"])
     assert v["outcome"] == CANNOT_TELL and "step_sensitivity" in v["statement"], v["statement"]
+    assert "--every" not in r["note"]
+    # Evaluated on every K-th sample, the coarse step may be evaluate's own: its advice
+    # says so first (a new-user check was told to train on more trajectories).
+    thinned = _reasons(verdict(truth, coarse, report=dict(report, every=16),
+                               reference=reference))["step_sensitivity"]["note"]
+    assert "evaluate --every 16" in thinned and "a smaller --every" in thinned
     # A report without the check (train's own evaluation) leaves the reason out.
     del report["step_sensitivity"]
     assert "step_sensitivity" not in _reasons(verdict(truth, coarse, report=report,
@@ -614,6 +620,11 @@ def test_a_failed_minimum_is_said_with_the_right_comparison():
     big = {"name": "residual_ratio", "value": 3.0, "threshold": 2.0, "passed": False, "note": "r"}
     assert _said(big) == "residual_ratio = 3 > 2 (r)"
     assert _said(dict(big, value=1.5, passed=True)) == "residual_ratio = 1.5 <= 2 (r)"
+    # A value that rounds to its limit is given to the digits that tell them apart (a
+    # new-user check read "step_sensitivity = 0.1 > 0.1").
+    close = {"name": "step_sensitivity", "value": 0.1006, "threshold": 0.1, "passed": False,
+             "note": "s"}
+    assert _said(close) == "step_sensitivity = 0.1006 > 0.1 (s)"
 
 
 def test_not_consistent_names_only_the_variables_that_carry_the_excess():

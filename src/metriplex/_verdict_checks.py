@@ -137,10 +137,19 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
                              "is not a model of dx/dt there; if `train` noted coarse steps, "
                              "sample more finely (or train with --scheme hermite where it did "
                              "not), else train " + ("on more trajectories" if converged
-                                                    else "longer or on more trajectories")))
+                                                    else "longer or on more trajectories")
+                             + _every_note(report.get("every", 1))))
         reasons.append(_reason("step_sensitivity", sens, th.step_sensitivity, sens_pass,
                                CANNOT_TELL, sens_note))
     return reasons
+
+
+def _every_note(every: int) -> str:
+    """What the step check's advice adds where evaluate read every ``every``-th sample."""
+    if every <= 1:
+        return ""
+    return (f"; here the rollouts step {every} samples at a time (evaluate --every {every}), "
+            "so first try a smaller --every")
 
 
 def _residual_checks(rel_gen: float | None, rel_box: float | None, box_note: str,
@@ -381,4 +390,7 @@ def _said(r: dict[str, Any]) -> str:
         return f"{r['name']} = {v:.3g}, within its limit {_fmt(lim)} but failed ({r['note']})"
     cmp = (">" if above else "<") if failed else (">=" if above else "<=")
     said = "" if lim is None or isinstance(lim, bool) else f" {cmp} {_fmt(lim)}"
-    return f"{r['name']} = {_fmt(v)}{said} ({r['note']})"
+    value = _fmt(v)
+    if said and isinstance(v, float) and value == _fmt(lim) and v != lim:
+        value = f"{v:.4g}"  # not "0.1 > 0.1" for 0.1006 against 0.1
+    return f"{r['name']} = {value}{said} ({r['note']})"

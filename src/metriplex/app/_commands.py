@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 from .._errors import MetriplexError
 from ..data import noise_level
 from ..verdict import Thresholds
-from ._summary import train_summary
+from ._summary import evaluated_noise_note, train_summary
 from ._outputs import check_figures, not_an_input
 from ._warnings import (against_constant, cells_hint, in_sample_warning, structure_warnings,
                         time_unit_warning, trained_on, trained_units, training_range_warning)
@@ -328,7 +328,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     check_names(args.run, data)
     figures = Path(args.figures) if args.figures else None
     metrics = evaluate_run(model, data, scheme=_scheme(args), figures=figures, horizon=args.horizon,
-                           solver=args.solver, progress=not args.quiet) | {"every": args.every}
+                           solver=args.solver, progress=not args.quiet) | {
+        "every": args.every, "noise_over_spread": noise_level(data)}
     run = run_config(args.run)
     units = run.get("units") or {}
     for line in (time_unit_warning(units, data) + training_range_warning(units, data)
@@ -352,7 +353,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int | None:
     if worse:
         print(f"warning: the model's rollouts (relative L2 "
               f"{metrics['rollout_error_mean_completed']:.3e}) are {against}.", file=sys.stderr)
-    for line in structure_warnings(metrics):
+    for line in structure_warnings(metrics) + evaluated_noise_note(metrics):
         print(line, file=sys.stderr)
     if not args.no_verdict:
         from .runs import run_verdict

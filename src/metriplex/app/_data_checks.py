@@ -38,7 +38,24 @@ def data_notes(train: Trajectories, valid: Trajectories | None, entropy: str,
             + swapped_axes_warning(parts) + gap_warning(parts) + repeated_column_warning(parts)
             + sample_warnings(train) + still_validation_warning(train, valid)
             + still_data_warning(parts) + entropy_warnings(parts, entropy)
-            + casimir_note(free, train))
+            + temperature_named_warning(train.names, entropy) + casimir_note(free, train))
+
+
+def temperature_named_warning(names: tuple[str, ...], entropy: str) -> list[str]:
+    """A warning where ``--entropy sum:...`` names a variable called as a temperature is
+    (``theta``, ``T``, ``temp``, ...): S must be a sum of entropies, and a temperature is none
+    (a new-user check's theta, given so, trained to "temperatures dE/d(theta) = 1")."""
+    import re
+
+    hot = [f"{names[i]} (column {i})" for i in entropy_variables(entropy) if 0 <= i < len(names)
+           and re.fullmatch(r"(theta|θ|t|temp|temperature)_?\d*", names[i].lower())]
+    if not hot:
+        return []
+    return [f"warning: --entropy {entropy} names {', '.join(hot)}, named as a temperature: S "
+            "is the sum of those variables, so they must be entropies, and a temperature is "
+            "none (its entropy is c ln(theta) + const). If they are temperatures, leave "
+            "--entropy out (S learned, as the (q, p, theta) pendulum: metriplex reproduce "
+            "pendulum-temperature)."]
 
 
 def _each(parts: list[Trajectories]):

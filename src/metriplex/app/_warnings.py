@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..verdict import Thresholds
-from ._horizon_note import predictability_note, step_warning
+from ._horizon_note import every_note, predictability_note, step_warning
 
 if TYPE_CHECKING:
     from .._units import Units
@@ -195,12 +195,13 @@ def cells_hint(metrics: dict, config: Any, n: int) -> list[str]:
 def structure_warnings(metrics: dict) -> list[str]:
     """Every warning on what the learned structure means: :func:`temperature_warnings`,
     :func:`entropy_rise_warning`, :func:`energy_change_warning`, the horizon of prediction
-    (:func:`~metriplex.app._horizon_note.predictability_note`), a learned energy that drives
+    (:func:`~metriplex.app._horizon_note.predictability_note`; ``every_note`` for evaluate
+    --every), a learned energy that drives
     almost none of the motion (friction carries it), and a learned entropy that the model's
     own flow decreases (L grad S = 0 only as a penalty)."""
     out = (temperature_warnings(metrics) + entropy_rise_warning(metrics)
            + energy_change_warning(metrics) + identified_note(metrics)
-           + predictability_note(metrics))
+           + predictability_note(metrics) + every_note(metrics))
     negative = metrics.get("entropy_production_negative_fraction")
     if negative is not None and negative > NEGATIVE_PRODUCTION:
         residual = metrics.get("degeneracy_L_gradS_relative")
