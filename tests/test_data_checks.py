@@ -96,8 +96,9 @@ def test_times_that_do_not_increase_get_the_cause_that_applies():
     # "Sort the samples by time" would interleave two recordings numbered alike, and cannot
     # help float32 times that are too coarse for an epoch clock.
     x = np.zeros((4, 1))
-    with pytest.raises(mx.MetriplexError, match=r"2 separate blocks \(rows 0-1, 4-5\) and "
-                                                r"repeat times: two recordings under one id"):
+    with pytest.raises(mx.MetriplexError,
+                       match=r"2 separate blocks \(rows 0-1, 4-5 counted from 0 after any "
+                             r"header\) and repeat times: two recordings under one id"):
         mx.Trajectories(np.array([0, 0, 1, 1, 0, 0]), np.array([0.0, 1, 0, 1, 0, 1]),
                         np.zeros((6, 1)))
     epoch = np.float32(1.7e9) + np.arange(4, dtype=np.float32)  # rounds to equal values

@@ -97,6 +97,27 @@ def test_many_variables_name_the_largest_and_keep_the_legend_off_the_lines():
     plt.close(fig)
 
 
+def test_a_variable_has_one_colour_in_every_figure_and_the_bold_trajectory_is_named():
+    # A new-user check: error.png drew q orange and p green, residual.png the other way round
+    # (colours by rank of size, which differs between the figures); the bold trajectory of the
+    # left panel was in no legend.
+    T = 30
+    ts = np.linspace(0.0, 3.0, T)
+    names = ["q", "p", "s"]
+    errors = {"q": np.full(T, 1e-3), "p": np.full(T, 1e-1), "s": np.full(T, 1e-2)}
+    fig = plots.rollout_errors(np.tile(ts, (2, 1)), np.full((2, T), 1e-2), per_variable=errors,
+                               trajectory=1, ids=[4, 7])
+    colours = {line.get_label(): line.get_color() for line in fig.axes[1].get_lines()}
+    assert "trajectory 7, per variable at right" in fig.axes[0].get_legend_handles_labels()[1]
+    plt.close(fig)
+    residual = np.stack([np.full(T - 1, v) for v in (1e-1, 1e-3, 1e-2)], axis=1)  # p smallest
+    fig = plots.residual_over_time(ts[1:], residual, names)
+    again = {line.get_label(): line.get_color() for line in fig.axes[0].get_lines()}
+    plt.close(fig)
+    assert {k: colours[k] for k in names} == {k: again[k] for k in names}
+    assert len({colours[k] for k in names}) == 3
+
+
 def _blow_up(c):
     """p' = -c (p^2 + 1): p = tan(...) blows up, sooner from some states than from others."""
     return mx.GenericModel(mx.Known(lambda x: c * x[0] * (x[1] ** 2 + 1.0)), mx.SumOf((2,)),

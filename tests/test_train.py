@@ -147,10 +147,10 @@ def _checkpoint_step(path) -> int:
         return json.loads(f.readline())["done"]
 
 
-def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path, monkeypatch):
+def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path, monkeypatch, capsys):
     """Killed in the first stage, then interrupted in the main one: each resumed from its own
     checkpoint, the run ends with the model and history of the uninterrupted one."""
-    import metriplex._checkpoint as checkpoint
+    from metriplex._fit_loop import FitLoop
     from metriplex.config import RunConfig
     from metriplex.runs import train_run
 
@@ -181,20 +181,25 @@ def test_resume_after_sigkill_matches_uninterrupted_run(tmp_path, monkeypatch):
             == json.loads((tmp_path / "full" / "config.json").read_text())["config"])
     # Resumed here by the training that `train --resume` runs (its command line's resume:
     # test_ctrl_c_in_train_saves_a_checkpoint_and_the_run_resumes), without the evaluation
-    # and figures after it; interrupted (as Ctrl-C does) in the main stage at step KILL_AT.
-    write, pressed = checkpoint.save, []
+    # and figures after it; interrupted in the main stage right after the chunk of steps that
+    # ends at KILL_AT, before its evaluation: where a Ctrl-C pressed during a chunk stops the
+    # loop (its evaluation is then made by the resumed run, so the history misses no step).
+    chunk, pressed = FitLoop.next_chunk, []
 
-    def write_then_interrupt(path, tree, meta):
-        write(path, tree, meta)
-        if Path(path).name == "checkpoint.ckpt" and meta["done"] == KILL_AT and not pressed:
+    def chunk_then_interrupt(self):
+        chunk(self)
+        if Path(self.checkpoint.path).name == "checkpoint.ckpt" and self.state.done == KILL_AT \
+                and not pressed:
             pressed.append(KILL_AT)
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(checkpoint, "save", write_then_interrupt)
+    monkeypatch.setattr(FitLoop, "next_chunk", chunk_then_interrupt)
     _, h, *_ = train_run(data, full, tmp_path / "cut", resume=True, progress=False)
-    assert h.stopped == f"interrupted at step {KILL_AT}"
-    monkeypatch.setattr(checkpoint, "save", write)
+    assert h.stopped == f"interrupted at step {KILL_AT}" and KILL_AT not in h.step
+    assert _checkpoint_step(tmp_path / "cut" / "checkpoint.ckpt") == KILL_AT
+    monkeypatch.setattr(FitLoop, "next_chunk", chunk)
     train_run(data, full, tmp_path / "cut", resume=True, progress=False)
+    assert "resuming training 1 from its checkpoint at step 200" in capsys.readouterr().err
     a = mx.load(tmp_path / "full")
     b = mx.load(tmp_path / "cut")
     x = jnp.asarray(data.x[:10])

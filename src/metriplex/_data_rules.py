@@ -103,7 +103,9 @@ def _why_not_increasing(rows: np.ndarray, t_given: np.ndarray, at: float) -> str
     blocks = np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1)
     times = np.asarray(t_given[rows], np.float64)
     distinct = len(np.unique(times)) == len(times)
-    spans = ", ".join(f"{b[0]}-{b[-1]}" for b in blocks[:3])
+    # Data rows from 0, not a CSV's file lines (those count the header and any blank line).
+    spans = (", ".join(f"{b[0]}-{b[-1]}" for b in blocks[:3])
+             + " counted from 0 after any header")
     if len(blocks) > 1 and not distinct:
         return (f"Its rows stand in {len(blocks)} separate blocks (rows {spans}) and repeat "
                 "times: two recordings under one id? Give each its own trajectory id.")

@@ -271,8 +271,10 @@ class FitLoop:
                 finished = resume and (
                     state.done >= self.steps
                     or history.stopped.startswith(("early stop", "converged")))
-                if resume and not finished:
-                    self.next_chunk()  # the restored history holds the evaluation at its step
+                if resume and not finished and history.step and history.step[-1] == state.done:
+                    # The restored history holds the evaluation at its step, unless Ctrl-C
+                    # came between a chunk and its evaluation: then the loop makes it first.
+                    self.next_chunk()
                 while not finished:
                     ctrl_c.check()
                     self.record_evaluation()

@@ -392,7 +392,8 @@ def spacing_note(train: Trajectories, spacing: int, given: int | None) -> list[s
     return [f"note: the training data's rates change from one pair to the next {cause} "
             f"(roughness {near:.2g} between neighbouring samples, where noise "
             f"gives 1; {apart:.2g} between samples {spacing} apart; the noise is about "
-            f"{noise:.1%} of a variable's standard deviation, the median over the variables): "
+            f"{noise:.1%} of a variable's standard deviation over the training data, the "
+            "median over the variables): "
             f"training uses pairs "
             f"{spacing} samples apart (each trajectory as {spacing} interleaved ones, every "
             "sample still used; README, Noisy data). --every 1 trains on neighbouring samples."]

@@ -1,15 +1,17 @@
 """Saving a figure: laid out once, then written as PNG and PDF with its raw numbers (NPZ)
-(#16); :func:`save_figure` is public as ``metriplex.plots.save_figure``."""
+(#16); :func:`save_figure` is public as ``metriplex.plots.save_figure``. And the figures'
+shared placement of legends and time axes."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import matplotlib
 import numpy as np
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
     from numpy.typing import ArrayLike
 
@@ -75,3 +77,23 @@ def save_figure(fig: Figure, stem: str | Path, **raw: ArrayLike) -> list[Path]:
         paths.append(p)
     plt.close(fig)
     return paths
+
+
+def legend(ax: Axes, many: bool, **kw: Any) -> None:
+    """A legend inside the axes, or outside to the right when it has many entries, so it
+    never covers the lines."""
+    if not ax.get_legend_handles_labels()[0]:
+        return
+    if many:
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+                  **kw)
+    else:
+        ax.legend(fontsize=8, **kw)
+
+
+def time_limits(ax: Axes, ts: ArrayLike) -> None:
+    """The whole time grid, even where nothing could be drawn (a rollout that failed at once)."""
+    ts = np.asarray(ts, dtype=np.float64)
+    ts = ts[np.isfinite(ts)]
+    if len(ts) and ts.max() > ts.min():
+        ax.set_xlim(ts.min(), ts.max())

@@ -28,7 +28,7 @@ from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
 from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
 from ._option import option
-from ._resume import checkpoint_seconds
+from ._resume import checkpoint_seconds, resuming_line
 from ._stages import before_main, left_of
 from .config import RunConfig
 
@@ -181,10 +181,16 @@ class Training:
         model = self.first if r == 0 else build_model(
             config, train, key=m_key, units=self.units, constant=self.constant, given=self.given)
         main = resumed and checkpoint_path(self.out, r).is_file()
+        which = f"training {r + 1}" if self.repeats > 1 else "the training"
+        if main:
+            print(resuming_line(checkpoint_path(self.out, r), which), file=sys.stderr)
         if not main:  # the stages before the main one, each resumed from its own checkpoint
 
             def checkpoint(stage: str) -> Checkpoint:
                 path = checkpoint_path(self.out, r, stage)
+                if resumed and path.is_file():
+                    print(resuming_line(path, f"{which}'s {stage.replace('-', ' ')}"),
+                          file=sys.stderr)
                 return Checkpoint(path, every=config.checkpoint_every,
                                   resume=resumed and path.is_file())
 

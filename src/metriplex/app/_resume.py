@@ -106,14 +106,35 @@ def spent_seconds(out: Path) -> float:
     return seconds if seconds > 0 else 0.0
 
 
+def _checkpoint_meta(path: Path) -> dict:
+    """A checkpoint's header (its step ``done`` and ``history``), ``{}`` where it cannot be
+    read."""
+    try:
+        with open(path, "rb") as f:
+            f.readline()  # the magic line
+            meta = json.loads(f.readline())
+        return meta if isinstance(meta, dict) else {}
+    except (OSError, ValueError):
+        return {}
+
+
 def checkpoint_seconds(path: Path) -> float:
     """The training time that a checkpoint's history holds (the last of its ``time``), 0 where
     there is none or it cannot be read: what a resumed :func:`~metriplex.fit` counts against its
     ``max_seconds`` before it trains on."""
     try:
-        with open(path, "rb") as f:
-            f.readline()  # the magic line
-            times = json.loads(f.readline())["history"]["time"]
+        times = _checkpoint_meta(path)["history"]["time"]
         return float(times[-1]) if times else 0.0
-    except (OSError, ValueError, KeyError, TypeError, IndexError):
+    except (KeyError, TypeError, ValueError, IndexError):
         return 0.0
+
+
+def resuming_line(path: Path, what: str) -> str:
+    """What ``metriplex train --resume`` says as it goes on with ``what`` (e.g. "training 1")
+    from the checkpoint at ``path``: the step it goes on from, or that it had ended."""
+    meta = _checkpoint_meta(path)
+    done, stopped = meta.get("done"), str((meta.get("history") or {}).get("stopped", ""))
+    at = f" at step {done:,}".replace(",", " ") if isinstance(done, int) else ""
+    if stopped and not stopped.startswith("interrupted"):
+        return f"resuming: {what} had ended{at} ({stopped}); kept as it was"
+    return f"resuming {what} from its checkpoint{at}"

@@ -81,7 +81,8 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     noise = metrics.get("noise_over_spread")
     if noise is not None and noise >= NOTED_NOISE:  # audit 10: read as the model's error alone
         rollouts += (f"; against the recorded states, whose noise (about {noise:.1%} of a "
-                     "variable's standard deviation) it includes: `metriplex evaluate` on "
+                     "variable's standard deviation over the evaluated trajectories, which "
+                     "may differ from the training data's) it includes: `metriplex evaluate` on "
                      "clean data, where there are, tells the model's own error")
     coarse = metrics.get("coarse_steps")
     if coarse is not None:  # a new-user check: 3.5e-3 here, 16x that on a finer grid
@@ -142,6 +143,7 @@ def evaluated_noise_note(metrics: dict) -> list[str]:
     if noise is None or noise < NOTED_NOISE:
         return []
     return [f"note: the evaluated states carry noise of about {noise:.1%} of a variable's "
-            "standard deviation (noise_over_spread, the median over the variables): the "
+            "standard deviation over them (noise_over_spread, the median over the "
+            "variables): the "
             "rollout errors above are against them, noise included; evaluated on clean data "
             "from the same initial states, where there are, they tell the model's own error."]

@@ -15,7 +15,8 @@ if TYPE_CHECKING:
 
 #: The title's line for each gauge of the temperatures (``identified``'s ``temperatures``).
 GAUGE = {
-    "determined": "determined by the data where heat flows (L and S given)",
+    "determined": "no gauge freedom where heat flows (L and S given): as accurate as the fit, "
+                  "which noise on the data limits (no error bar drawn)",
     "factor": "up to one common factor: L is learned, and (L/a, aE) give the same flow",
     "ratios": "only their ratios are determined: with L = 0 their common scale and sign are "
               "not (-E gives the same flow)",

@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from ._layout import SAVE_DPI as SAVE_DPI, save_figure as save_figure  # noqa: E402
+from ._layout import legend as _legend, time_limits as _time_limits  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -75,26 +76,6 @@ def _top_k(values: dict, k: int) -> list:
     return sorted(values, key=lambda n: size(values[n]), reverse=True)[:k]
 
 
-def _legend(ax, many: bool, **kw) -> None:
-    """A legend inside the axes, or outside to the right when it has many entries, so it
-    never covers the lines."""
-    if not ax.get_legend_handles_labels()[0]:
-        return
-    if many:
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
-                  **kw)
-    else:
-        ax.legend(fontsize=8, **kw)
-
-
-def _time_limits(ax, ts) -> None:
-    """The whole time grid, even where nothing could be drawn (a rollout that failed at once)."""
-    ts = np.asarray(ts, dtype=np.float64)
-    ts = ts[np.isfinite(ts)]
-    if len(ts) and ts.max() > ts.min():
-        ax.set_xlim(ts.min(), ts.max())
-
-
 def _line(ax, ts, y, **kw):
     """``ax.plot``, with markers when fewer than three points are finite (else they vanish)."""
     few = np.sum(np.isfinite(np.asarray(y, dtype=np.float64))) < 3
@@ -102,12 +83,14 @@ def _line(ax, ts, y, **kw):
 
 
 def _per_variable_lines(ax, ts, per_variable: dict, max_labels: int, ceiling=None):
-    """One thin line per variable; the ``max_labels`` largest are named, the rest grey."""
+    """One thin line per variable; the ``max_labels`` largest are named, the rest grey. A
+    variable's colour is that of its place among the variables, the same in every figure."""
     named = _top_k(per_variable, max_labels)
     rest = [n for n in per_variable if n not in named]
-    for i, name in enumerate(named):
-        ax.semilogy(ts, _positive(per_variable[name], ceiling), lw=0.8, alpha=0.8,
-                    color=f"C{i % 10}", label=name)
+    for i, name in enumerate(per_variable):
+        if name in named:
+            ax.semilogy(ts, _positive(per_variable[name], ceiling), lw=0.8, alpha=0.8,
+                        color=f"C{i % 10}", label=name)
     for j, name in enumerate(rest):
         ax.semilogy(ts, _positive(per_variable[name], ceiling), lw=0.5, color="0.7",
                     label=f"other {len(rest)} variables" if j == 0 else None, zorder=0)
@@ -119,8 +102,9 @@ def loss_curves(history: History, ax: Axes | None = None) -> Figure:
     exactly zero (an untouched hinge) is not drawn there, so it cannot stretch the axis."""
     fig, ax = _axes(ax)
     steps = np.asarray(history.step)
-    for name, vals in history.train.items():
-        ax.semilogy(steps, _positive(vals), label=f"train {name}", lw=2 if name == "total" else 1)
+    for name, vals in history.train.items():  # the total wide and pale, under its terms
+        ax.semilogy(steps, _positive(vals), label=f"train {name}", **(
+            {"lw": 4, "alpha": 0.35, "zorder": 1} if name == "total" else {"lw": 1, "zorder": 2}))
     for vals in [history.valid["total"]] if "total" in history.valid else []:
         ax.semilogy(steps, _positive(vals), "k--", label="validation total", lw=2)
     _log_limits(ax, *[line.get_ydata() for line in ax.get_lines()])
@@ -322,7 +306,9 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
         drawn.append(e)
         color = "C3" if failed[k] >= 0 else "C0"
         ax.semilogy(ts[k], e, lw=1.4 if k == trajectory else 0.7,
-                    alpha=1.0 if k == trajectory else 0.6, color=color)
+                    alpha=1.0 if k == trajectory else 0.6, color=color,
+                    label=f"trajectory {k if ids is None else ids[k]}"
+                    + (", per variable at right" if wide else "") if k == trajectory else None)
         if failed[k] >= 0:
             last = np.flatnonzero(np.isfinite(e[: max(int(failed[k]), 1)]))
             y = e[last[-1]] if len(last) else ERROR_CEILING
@@ -393,7 +379,7 @@ def residual_over_time(ts: np.ndarray, residual: np.ndarray, names: Sequence[str
                 empty="no finite positive residual to draw")
     _time_limits(ax, ts)
     ax.set_xlabel("t")
-    ax.set_ylabel("|residual| in units of d_i / tau (data scale / time scale)")
+    ax.set_ylabel("|residual of x_i| / typical rate of x_i\n(its data scale / the time scale)")
     _legend(ax, entries > 4, ncol=1 if entries > 4 else 2)
     ax.set_title("one-step residual on the observed pairs"
                  + (f" (the {max_labels} largest named)" if many else ""))
