@@ -310,11 +310,13 @@ def test_cli_divergence_keeps_the_best_model(trained_run, tmp_path):
 
     # The data and options of the session's shared run (tests/conftest.py), whose worker has
     # compiled its rollouts and model already; here with a learning rate that diverges at once.
+    # Two trainings, not the default's four: the second from another initialisation diverges
+    # too, and the run keeps the best model of either (each training costs seconds here).
     data = mx.read(trained_run / "data.npz")
     options = list(TRAINED_RUN_OPTIONS)
     options[options.index("--steps") + 1] = "400"
     code = main(["train", str(trained_run / "data.npz"), "--out", str(tmp_path / "run"),
-                 *options, "--lr", "1e12", "--eval-every", "20"])
+                 *options, "--lr", "1e12", "--eval-every", "20", "--repeats", "2"])
     assert code == 2
     assert (tmp_path / "run" / "model.mpx").exists()
     h = json.loads((tmp_path / "run" / "history.json").read_text())
