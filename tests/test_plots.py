@@ -253,6 +253,32 @@ def test_the_report_shows_the_worst_trajectory_and_names_it(tmp_path):
     assert failed[shown] >= 0 and failed[shown] == failed[failed >= 0].min()
 
 
+def test_the_error_figure_is_standardised_so_an_offset_does_not_shrink_it(tmp_path):
+    # A new-user check's bath entropy near 1000 drew rollout errors of 1e-5 (the relative
+    # error, which the offset shrinks) where evaluate's standardised error was 7e-3.
+    oscillator = mx.GenericModel(mx.Known(lambda x: 0.5 * (x[0] ** 2 + x[1] ** 2)),
+                                 mx.SumOf((2,)), mx.CanonicalPoisson(3, 1), mx.ZeroFriction(3))
+    ts = np.arange(41) * 0.05
+    xs = [np.stack([a * np.cos(ts) + b * np.sin(ts), b * np.cos(ts) - a * np.sin(ts),
+                    np.linspace(0.0, 0.2, len(ts))], axis=1)
+          for a, b in [(1.0, 0.0), (0.5, 0.5), (0.0, 1.0)]]
+    xs[1] = xs[1] * np.array([1.1, 1.1, 1.0])  # one trajectory the model misses
+    saved = {}
+    for offset in (0.0, 1000.0):
+        data = mx.Trajectories.from_list([(ts, x + [0.0, 0.0, offset]) for x in xs],
+                                         ("q", "p", "s"))
+        report = mx.evaluate(oscillator, data, scheme=mx.RK4())
+        report_figures(oscillator, data, tmp_path / str(offset), scheme="rk4")
+        with np.load(tmp_path / str(offset) / "error.npz") as error:
+            saved[offset] = error["error"]
+        # Each curve's root mean square over time is the trajectory's standardised error.
+        rms = np.sqrt(np.nanmean(saved[offset] ** 2, axis=1))
+        assert np.mean(rms) == pytest.approx(report["rollout_error_standardised_mean"],
+                                             rel=1e-6)
+    np.testing.assert_allclose(saved[1000.0], saved[0.0], rtol=1e-6, atol=1e-9)
+    assert np.nanmax(saved[0.0]) > 1e-2
+
+
 def test_the_worst_trajectory_is_the_first_to_fail_whatever_the_integer_width():
     # JAX's int32 failed steps wrapped the int64 sentinel to -1, so a trajectory that had not
     # failed (the first) was shown as "the worst" beside one that had.

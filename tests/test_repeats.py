@@ -273,3 +273,21 @@ def test_a_resumed_run_counts_the_time_its_interrupted_run_spent(tmp_path):
     *_, calls, _ = _run([_history(0.9), _history(0.001)], tmp_path, budget=240.0,
                         began=time.perf_counter() - 250.0)
     assert len(calls) == 1
+
+
+def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
+    # A new-user check's two coupled spins (32 trajectories) trained four times at 0.25-0.30
+    # of the spread and were told nothing but the scores; 128 trajectories met the bar at once.
+    def outcomes(*scores, change=None, failures=0):
+        return {"trainings": [{"score": s, "failures": failures, "change": ""} for s in scores]
+                + ([{"score": 0.248, "failures": 0, "change": change}] if change else []),
+                "kept_training": 0}
+
+    note = _repeats.trainings_note(outcomes(0.255, 0.304, 0.258, change="--quadratic"))
+    assert "3 trainings from other initialisations did alike (scores within 1.2x" in note
+    assert "too few trajectories" in note and "more of the structure" in note
+    for unlike in (outcomes(1.27, 0.18, 0.19),          # another start helped: no such note
+                   outcomes(0.015, 0.016, 0.017),       # good ones
+                   outcomes(0.25, 0.26, failures=1),    # failing rollouts
+                   outcomes(0.25)):                     # one training: no note at all
+        assert "did alike" not in _repeats.trainings_note(unlike)

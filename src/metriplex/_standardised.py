@@ -28,3 +28,14 @@ def standardised_errors(pred: np.ndarray, obs: np.ndarray, lengths: np.ndarray,
         den = np.linalg.norm((o - mean) / d)
         out.append(float(num / max(den, 1e-300)))
     return out
+
+
+def standardised_error_over_time(pred: np.ndarray, obs: np.ndarray, mean: np.ndarray,
+                                 d: np.ndarray) -> np.ndarray:
+    r"""One trajectory's standardised error at each time, :math:`|D^{-1}(\hat x(t) - x(t))|`
+    over the root mean square of :math:`|D^{-1}(x - \bar x)|` along it (``mean`` and ``d`` as
+    :func:`~metriplex.data.state_statistics` gives them): its root mean square over the times is
+    the trajectory's :func:`standardised_errors`. Non-finite where the rollout is."""
+    den = float(np.sqrt(np.mean(np.sum(((obs - mean) / d) ** 2, axis=-1))))
+    with np.errstate(over="ignore", invalid="ignore"):  # blown-up states: inf; failed: NaN
+        return np.linalg.norm((pred - obs) / d, axis=-1) / max(den, 1e-300)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -18,8 +18,9 @@ import numpy as np
 from . import plots
 from .._errors import MetriplexError
 from .config import scheme_from_name
-from ..data import Trajectories, state_scale, time_scale
-from ..diagnostics import _relative_error, energy_entropy_along, error_over_time, rollout_data
+from ..data import Trajectories, state_scale, state_statistics, time_scale
+from ..diagnostics import energy_entropy_along, rollout_data
+from .._standardised import standardised_error_over_time, standardised_errors
 from .._progress import progress_bar
 from .._model import float_dtype
 from .._structure_check import _terms_at, identified, states_read
@@ -49,6 +50,10 @@ class Truth:
     data_label: str = "true"
     grad_energy: Callable[[np.ndarray], np.ndarray] | None = None
 
+
+#: The error figure's axis: each trajectory's error in standard deviations at each time
+#: (:func:`~metriplex._standardised.standardised_error_over_time`).
+STANDARDISED_LABEL = "error in standard deviations\n|D⁻¹(x − x_data)| / rms |D⁻¹(x_data − mean)|"
 
 #: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ; and the one it
 #: adds where S is a sum of entropy variables (the learned temperatures).
@@ -94,14 +99,20 @@ def report_figures(model: GenericModel, data: Trajectories, folder: str | Path, 
 
 def worst_trajectory(out: Rollout, xs: np.ndarray, lengths: np.ndarray) -> int:
     """The index of the worst rollout: the one that failed first, if any did, else the one
-    with the largest relative L2 error over its trajectory (``xs``, ``lengths``: the padded
-    data, as :func:`~metriplex.diagnostics.rollout_data` returns them)."""
+    with the largest standardised error over its trajectory, which no offset of a variable
+    shrinks (``xs``, ``lengths``: the padded data, as
+    :func:`~metriplex.diagnostics.rollout_data` returns them)."""
     failed = np.asarray(out.failed_step, dtype=np.int64)  # int32 from JAX: the sentinel below
     if np.any(failed >= 0):                                 # would wrap to -1 in it
         return int(np.argmin(np.where(failed >= 0, failed, np.iinfo(np.int64).max)))
     pred = np.asarray(out.xs, dtype=np.float64)
-    error = [_relative_error(pred[j, :T], xs[j, :T]) for j, T in enumerate(lengths)]
+    error = standardised_errors(pred, xs, np.asarray(lengths), _states(xs, lengths))
     return int(np.nanargmax(error)) if not np.isnan(error).all() else 0
+
+
+def _states(xs: np.ndarray, lengths: Sequence[int] | np.ndarray) -> np.ndarray:
+    """Every trajectory's states, without the padding."""
+    return np.concatenate([xs[j, :T] for j, T in enumerate(lengths)])
 
 
 def _named(fig, which: str):
@@ -126,10 +137,12 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
                       folder / "trajectories", t=ts, learned=pred, names=np.array(names),
                       failed_step=failed[k], trajectory=data.ids[k], **{truth.data_label: obs})
     bar.update()
-    # Errors of every trajectory: NaN after a failure (never a number standing for it).
+    # Errors of every trajectory, standardised as evaluate's rollout_error_standardised (which
+    # no offset shrinks): NaN after a failure (never a number standing for it).
     errors = np.full(all_pred.shape[:2], np.nan)
+    mean, d, _ = state_statistics(_states(xs, lengths))
     for j, Tj in enumerate(lengths):
-        errors[j, :Tj] = error_over_time(all_pred[j, :Tj], xs[j, :Tj])
+        errors[j, :Tj] = standardised_error_over_time(all_pred[j, :Tj], xs[j, :Tj], mean, d)
     scale = state_scale(data.x)
     per_var = np.abs(pred - obs) / scale[None, :]
     reference = ({} if truth.reference_error is None
@@ -138,7 +151,8 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
         _named(plots.rollout_errors(all_ts, errors, failed_step=failed,
                                     per_variable=dict(zip(names, per_var.T)), trajectory=k,
                                     ids=list(data.ids), reference=truth.reference_error,
-                                    reference_label=truth.reference_label), which),
+                                    reference_label=truth.reference_label,
+                                    ylabel=STANDARDISED_LABEL), which),
         folder / "error", t=all_ts, error=errors, failed_step=failed, trajectory=data.ids,
         error_per_variable=per_var, shown=data.ids[k], names=np.array(names), **reference)
     bar.update()

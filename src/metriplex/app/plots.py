@@ -279,7 +279,8 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
                    per_variable: dict[str, np.ndarray] | None = None,
                    trajectory: int | None = None, ids: Sequence[int] | None = None,
                    reference: ArrayLike | None = None, reference_label: str = "ground truth",
-                   max_labels: int = MAX_LABELS) -> Figure:
+                   max_labels: int = MAX_LABELS,
+                   ylabel: str = "relative error |x - x_data| / rms |x_data|") -> Figure:
     """Rollout errors of every trajectory, and per variable of one, against time (log scale).
 
     ``ts``, ``errors``: ``(K, T)`` arrays (padded; NaN where a rollout stopped or a trajectory
@@ -287,7 +288,7 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
     trajectory's relative error, a failed one marked with an ``x`` at its last state before
     the failure, and the title says how many failed; ``reference``: a ``(T,)`` error to compare
     trajectory ``trajectory``'s with (e.g. the true model's under the same scheme), dashed and
-    named ``reference_label``. Right (with ``per_variable``, a dict of
+    named ``reference_label``; ``ylabel`` says what the errors are. Right (with ``per_variable``, a dict of
     ``(T,)`` errors of trajectory ``trajectory``): each variable's error, the ``max_labels``
     largest named in a legend outside the axes. Only finite positive values are drawn, errors
     above :data:`ERROR_CEILING` at it."""
@@ -329,7 +330,7 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
     _log_limits(ax, *(d[1:] for d in drawn), empty="no rollout got past its first state")
     _time_limits(ax, ts)
     ax.set_xlabel("t")
-    ax.set_ylabel("relative error |x - x_data| / rms |x_data|")
+    ax.set_ylabel(ylabel)
     ax.set_title(f"rollout error over time, {K} trajectories"
                  + (f" ({n_failed} of {K} failed)" if n_failed else " (none failed)"))
     _legend(ax, False)

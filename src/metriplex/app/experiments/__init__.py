@@ -33,8 +33,10 @@ from ..config import PRESETS, RunConfig, preset, scheme_from_name
 #: The settings that describe what is learned and what is given (``run_experiment(defaults=True)``
 #: keeps only these from a preset).
 STRUCTURE_KEYS = ("energy", "entropy", "poisson", "friction", "jacobi")
-from ...diagnostics import (energy_entropy_along, error_over_time, evaluate, potential_along,
-                             rollout_data, time_to_error)
+from ...data import state_statistics
+from ...diagnostics import (energy_entropy_along, evaluate, potential_along, rollout_data,
+                             time_to_error)
+from ..._standardised import standardised_error_over_time
 from ...integrate import CrankNicolson
 from ...io import write, write_json
 from .._warnings import structure_warnings
@@ -313,7 +315,9 @@ def _figures_and_gauge(exp, system, model, test, folder: Path, scheme, rollout,
     fe, fs = result["energy_gauge_fit"], result.get("entropy_gauge_fit")
     truth_out = truth_rollout[0]
     truth = Truth(
-        reference_error=error_over_time(np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs),
+        reference_error=standardised_error_over_time(
+            np.asarray(truth_out.xs, dtype=np.float64)[k, :T], obs,
+            *state_statistics(np.asarray(test.x))[:2]),
         reference_label="ground truth, Crank–Nicolson at the same dt",
         energy=fe["slope"] * E_t[m] + fe["offset"],
         entropy=None if fs is None else fs["slope"] * S_t[m] + fs["offset"],
