@@ -58,7 +58,10 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
 NOT_POISSON = ("The learned L is not a Poisson bivector there; training has no Jacobi penalty "
                "by default, and the penalty (--jacobi exact) need not bring it under the "
                "limit. Give L where it is known (--poisson canonical:K or file:L.npy); with "
-               "three variables, --poisson casimir3 builds it Poisson by construction.")
+               "three variables, --poisson casimir3 builds it Poisson by construction; a "
+               "known L that depends on the state (e.g. spins' cross products) in Python, "
+               "metriplex.KnownPoisson(fn) in the model given to metriplex.fit (not saved "
+               "to a model file).")
 
 
 #: What a NOT-consistent statement adds first where S is given and the observed data decrease

@@ -10,7 +10,9 @@ One set of functions judges ground-truth systems and learned models alike:
   and E's spread over the data, as its offset is arbitrary), and beyond noise along the data,
   which GENERIC data keep constant (``energy_change_along_data_over_spread``); entropy steps;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
-  factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``;
+  factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``,
+  in standardised coordinates (each variable in its standard deviation over the data), as the
+  verdict reads them;
 - the sign of the entropy production :math:`\dot S = \nabla S\cdot\dot x` at the states along
   the model's rollouts;
 - the step sensitivity: how much of the predicted motion changes when the data's time step is
@@ -334,7 +336,8 @@ def evaluate(
         null_reasons.update(why_not)
         bar.update()
     bar.set_postfix_str("structure residuals")
-    structure = structure_residuals(model, data.x)
+    # In standardised coordinates, as the verdict reads them: one name, one number.
+    structure = structure_residuals(model, data.x, scale=state_scale(data.x))
     bar.update()
     bar.close()
     null_reasons.update(structure.pop("null_reasons"))
