@@ -70,8 +70,8 @@ def test_run_folder_contents(oscillator_run):
                               "starts": 1, "residual_metric": "correlated",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
-                              "patience": 20, "repeats": 4, "every": 1, "scheme": "cn",
-                              "coarse_steps": None}
+                              "patience": 20, "repeats": 4, "good_score": 0.02, "every": 1,
+                              "scheme": "cn", "coarse_steps": None}
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
     assert not (run_dir / ".metriplex.lock").exists()
     mask = os.umask(0)

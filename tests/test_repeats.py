@@ -291,3 +291,36 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
                    outcomes(0.25, 0.26, failures=1),    # failing rollouts
                    outcomes(0.25)):                     # one training: no note at all
         assert "did alike" not in _repeats.trainings_note(unlike)
+
+
+def test_on_noisy_held_out_states_a_score_at_the_noise_is_good(tmp_path, capsys):
+    # A new-user check's 5 % noise: the held-out scores (against noisy states) could not fall
+    # under 2 % of the spread, so every run trained four times, each scoring about the noise.
+    from helpers import oscillator_data
+    from test_noise import add_noise
+
+    clean = oscillator_data(k=4, n_t=200)
+    assert _repeats.good_score(clean) == _repeats.GOOD_SCORE  # clean: the bar itself
+    assert _repeats.good_score(None) == _repeats.GOOD_SCORE
+    noisy = add_noise(clean, 0.05, seed=1)
+    good = _repeats.good_score(noisy)
+    assert good == pytest.approx(_repeats.NOISE_FLOOR * 0.05, rel=0.2)
+    calls = []
+
+    def one(r, resumed):
+        calls.append(r)
+        return f"model {r}", _history(0.064)
+
+    _repeats.train_repeats(one, repeats=4, out=tmp_path, resume=False, budget=None, began=0.0,
+                           keep=lambda m, h: None, good=good)
+    assert calls == [0]  # at the noise: good, one training
+    calls.clear()
+    _repeats.train_repeats(lambda r, resumed: one(r, resumed) if r else ("model 0", _history(
+        2 * good)), repeats=2, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, good=good)
+    err = capsys.readouterr().err
+    assert f"(good: <= {good:.3g}, 1.5x the noise on the held-out states)" in err
+    # The note on trainings that did alike judges them by the run's own limit.
+    header = {"trainings": [{"score": s, "failures": 0, "change": ""} for s in (0.064, 0.07)],
+              "kept_training": 0, "decided": {"good_score": good}}
+    assert "did alike" not in _repeats.trainings_note(header)

@@ -23,7 +23,7 @@ import jax.random as jr
 from .._errors import TrainingDiverged
 from .._model import with_dtype
 from .._units import Units
-from ..data import Trajectories
+from ..data import Trajectories, noise_level
 from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
 from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
@@ -46,6 +46,19 @@ REPEATS = 3
 #: accuracy the zoo's bar asks; 0.1 left charged-particle at one training and 4.5e-2 where
 #: this trains it twice to 1.9e-2, and no zoo case lost (docs/zoo.md).
 GOOD_SCORE = 0.02
+#: Where the held-out states carry noise, no model's score falls below it (the score is the
+#: rollouts' error against those states, in the same units as :func:`~metriplex.data.noise_level`
+#: measures the noise): a score within this factor of the noise on them is good too, its own
+#: error at most about the noise's size (sqrt(1.5**2 - 1) = 1.1 times it). A new-user check's
+#: 5 % noise (6.8 % of the held-out trajectories' spread): scores 0.064, 0.063, 0.065, four
+#: trainings where one served; clean data, every case of the zoo and outside it: noise 0.
+NOISE_FLOOR = 1.5
+
+
+def good_score(valid: Trajectories | None) -> float:
+    """The held-out score at or under which a training is good: :data:`GOOD_SCORE`, or
+    :data:`NOISE_FLOOR` times the noise on the held-out states where that is larger."""
+    return max(GOOD_SCORE, 0.0 if valid is None else NOISE_FLOOR * noise_level(valid))
 
 
 #: The friction that the last of three or more trainings learns where L = 0 (``--poisson
@@ -240,10 +253,9 @@ class Outcome:
                    best_step=history.best_step, stopped=history.stopped, seconds=seconds,
                    converged=history.converged)
 
-    @property
-    def good(self) -> bool:
-        """Held-out rollouts within :data:`GOOD_SCORE`, none failing."""
-        return self.failures == 0 and self.score <= GOOD_SCORE
+    def good(self, limit: float = GOOD_SCORE) -> bool:
+        """Held-out rollouts within ``limit`` (:func:`good_score`), none failing."""
+        return self.failures == 0 and self.score <= limit
 
     def rank(self) -> tuple[int, float]:
         """Fewer failed held-out rollouts first, then the lower score."""
@@ -257,11 +269,11 @@ class Outcome:
 def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, repeats: int,
                   out: Path, resume: bool, budget: float | None, began: float,
                   keep: Callable[[GenericModel, History], None],
-                  change: Callable[[int], str] = lambda r: "",
+                  change: Callable[[int], str] = lambda r: "", good: float = GOOD_SCORE,
                   ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
-    while the best so far is not :attr:`Outcome.good`, the last one converged or diverged (one
+    while the best so far is not :meth:`Outcome.good` (at ``good``, :func:`good_score`), the last one converged or diverged (one
     that a step budget ended wants more steps, not another start), the wall-time ``budget``
     (seconds from ``began``) lasts and no training was interrupted. Returns ``(best model, its
     history, every training's outcome, the index of the best)``. ``keep(model, history)``
@@ -274,10 +286,10 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
     outcomes: list[Outcome] = []
     diverged: TrainingDiverged | None = None
     for r in range(repeats):
-        if r and _enough(best, outcomes[-1], budget, began):
+        if r and _enough(best, outcomes[-1], budget, began, good):
             break
         if r:
-            print(_again_line(r, repeats, best, change(r)), file=sys.stderr)
+            print(_again_line(r, repeats, best, change(r), good), file=sys.stderr)
         start = time.perf_counter()
         try:
             model, history = one(r, resume and left_checkpoint(out, r))
@@ -311,8 +323,8 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
 
 
 def _enough(best: tuple[Any, History, Outcome] | None, last: Outcome, budget: float | None,
-            began: float) -> bool:
-    if best is not None and (best[2].good or best[1].stopped.startswith("interrupted")):
+            began: float, good: float = GOOD_SCORE) -> bool:
+    if best is not None and (best[2].good(good) or best[1].stopped.startswith("interrupted")):
         return True
     if not (last.converged or last.diverged):
         return True
@@ -320,7 +332,7 @@ def _enough(best: tuple[Any, History, Outcome] | None, last: Outcome, budget: fl
 
 
 def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
-                change: str = "") -> str:
+                change: str = "", good: float = GOOD_SCORE) -> str:
     if best is None:
         why = "every training so far diverged"
     else:
@@ -328,7 +340,9 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
         why = (f"{o.failures} held-out rollout(s) of the best model so far failed"
                if o.failures else
                f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
-               f"data's spread (good: <= {GOOD_SCORE})")
+               f"data's spread (good: <= {good:.3g}"
+               + (f", {NOISE_FLOOR}x the noise on the held-out states)" if good > GOOD_SCORE
+                  else ")"))
     how = (f"with {change} (the form the {r} before did not fit; the held-out rollouts "
            "choose)" if change else "from another initialisation")
     return (f"repeats: {why}; training {r + 1} of at most {repeats} {how} (--repeats 1: one "
@@ -351,7 +365,8 @@ def trainings_note(header: dict) -> str:
             + (f", with {change}" if change else "") + " "
             f"(their held-out scores during training: the error over the rollout check's "
             f"windows, in units of the data's spread, not the relative L2 below: {scores})"
-            + _alike_note(trainings))
+            + _alike_note(trainings, (header.get("decided") or {}).get("good_score")
+                          or GOOD_SCORE))
 
 
 #: Trainings from other initialisations whose held-out scores lie within this factor of each
@@ -363,7 +378,7 @@ def trainings_note(header: dict) -> str:
 ALIKE = 1.5
 
 
-def _alike_note(trainings: list[dict]) -> str:
+def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
     """Where two or more trainings from other initialisations (no changed settings) were all
     judged, none failing or good, with scores within :data:`ALIKE` of each other: that the
     limit is the data or the model's form, not the start."""
@@ -371,7 +386,7 @@ def _alike_note(trainings: list[dict]) -> str:
     scores = [o.get("score") for o in plain]
     if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
                               for s, o in zip(scores, plain))
-            or min(scores) <= GOOD_SCORE or max(scores) > ALIKE * min(scores)):
+            or min(scores) <= good or max(scores) > ALIKE * min(scores)):
         return ""
     return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
             f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "

@@ -8,7 +8,7 @@ import argparse
 
 from ..integrate import SCHEMES
 from ..structure import ACTIVATIONS
-from ._repeats import GOOD_SCORE, REPEATS
+from ._repeats import GOOD_SCORE, NOISE_FLOOR, REPEATS
 from ._stages import START_STEPS, STARTS
 from .config import FEATURES
 
@@ -85,7 +85,8 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
                    f"{STARTS} where L is learned, else 1)")
     w.add_argument("--repeats", type=int, metavar="K", help="train again from another "
                    "initialisation while the held-out rollouts of the best model so far err by "
-                   f"more than {GOOD_SCORE} of the data's spread or fail, up to K trainings in "
+                   f"more than {GOOD_SCORE} of the data's spread (on noisy held-out states, "
+                   f"{NOISE_FLOOR}x their noise if more) or fail, up to K trainings in "
                    f"all; the best is kept; the last of three where L = 0 learns --friction "
                    f"exchange, the last of four --quadratic (default: {REPEATS}, and a fourth "
                    "with --quadratic where E is the default network and the third does not "

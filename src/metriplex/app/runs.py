@@ -27,8 +27,8 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      stopping_for, units_for)
-from ._repeats import (Training, left_checkpoint, remove_stage_checkpoints, repeats_for,
-                       train_repeats)
+from ._repeats import (Training, good_score, left_checkpoint, remove_stage_checkpoints,
+                       repeats_for, train_repeats)
 from ._report import report_figures
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
@@ -217,7 +217,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     header_config, config = config.to_json(), dataclasses.replace(config, scheme=scheme)
     loss = build_loss(config, units, train)
     stopping = stopping_for(config)
-    repeats = repeats_for(config, valid)
+    repeats, good = repeats_for(config, valid), good_score(valid)
     header = {
         "config": header_config,
         # What options left at None/"auto" decided: the run's stages, walls and exact blocks
@@ -225,7 +225,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
         "decided": {**decisions(config),
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
-                    "repeats": repeats, "every": spacing, "scheme": scheme,
+                    "repeats": repeats, "good_score": good, "every": spacing, "scheme": scheme,
                     # said after training too, where the scheme learns the step's map
                     "coarse_steps": None if scheme in FOURTH_ORDER else coarse},
         "names": list(train.names),
@@ -256,7 +256,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     try:
         model, history, outcomes, chosen = train_repeats(
             one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
-            keep=keep, change=one.change_of)
+            keep=keep, change=one.change_of, good=good)
     except TrainingDiverged as e:
         keep(e.model, e.history)
         raise
