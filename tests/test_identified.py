@@ -66,6 +66,11 @@ def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
     assert temps["passed"] is True and temps["value"] == 0.0
     assert "with L = 0 the sign of E is free" in temps["note"]
     assert same[1]["outcome"] == "consistent", same[1]["statement"]
+    # ... of the structure, not the accuracy, which it names (a new-user check read
+    # "consistent" of rollouts 14 % off as a good model).
+    err = report["rollout_error_standardised_mean"]
+    assert f"not the accuracy: the rollouts err by {err:.3g} in standard deviations" in \
+        same[1]["statement"]
     assert same[1]["statement"].endswith("What the data determine: E is given; S is given.")
     # Temperatures of both signs in one state are no choice of E's sign (new-user check 14:
     # "a choice of E's sign, not an error" said of a nine-cell grid where most states had

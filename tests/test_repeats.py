@@ -286,7 +286,10 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
     note = _repeats.trainings_note(outcomes(0.255, 0.304, 0.258, change="--quadratic"))
     assert "3 trainings from other initialisations did alike (scores within 1.2x" in note
     assert "too few trajectories" in note and "more of the structure" in note
-    for unlike in (outcomes(1.27, 0.18, 0.19),          # another start helped: no such note
+    solved = outcomes(0.045, 0.056, 0.042, change="--quadratic")
+    solved["trainings"][-1]["score"] = 0.0067  # another form served: nothing to blame
+    for unlike in (solved,
+                   outcomes(1.27, 0.18, 0.19),          # another start helped: no such note
                    outcomes(0.015, 0.016, 0.017),       # good ones
                    outcomes(0.25, 0.26, failures=1),    # failing rollouts
                    outcomes(0.25)):                     # one training: no note at all

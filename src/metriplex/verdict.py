@@ -344,7 +344,7 @@ def verdict(
         key = [r for r in reasons if r["name"] == "residual_ratio"][0]
         statement = (f"consistent with GENERIC: {_said(key)}; the fitted model is GENERIC and "
                      f"its rollouts complete (all {sum(r['passed'] is True for r in reasons)} "
-                     "applicable checks pass; see verdict.reasons)." + (
+                     "applicable checks pass; see verdict.reasons)." + _accuracy(report) + (
                          "" if converged is not None else " How training ended was not given "
                          "(history=): a model still improving would be 'cannot tell'.") + (
                          " " + sr["identified"]["statement"][0].upper()
@@ -385,3 +385,10 @@ def verdict(
         "thresholds": dataclasses.asdict(th),
     }
 
+
+def _accuracy(report: dict[str, Any]) -> str:
+    """What a "consistent" adds of the model's accuracy, which it does not judge (a new-user
+    check read "consistent, all 14 checks pass" of rollouts 14 % off)."""
+    err = _finite(report.get("rollout_error_standardised_mean"))
+    return ("" if err is None else f" That is the structure, not the accuracy: the rollouts "
+            f"err by {err:.3g} in standard deviations (rollout_error_standardised_mean).")

@@ -273,8 +273,9 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
                   ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
-    while the best so far is not :meth:`Outcome.good` (at ``good``, :func:`good_score`), the last one converged or diverged (one
-    that a step budget ended wants more steps, not another start), the wall-time ``budget``
+    while the best so far is not :meth:`Outcome.good` (at ``good``, :func:`good_score`), the
+    last one converged or diverged (one that a step budget ended wants more steps, not another
+    start), the wall-time ``budget``
     (seconds from ``began``) lasts and no training was interrupted. Returns ``(best model, its
     history, every training's outcome, the index of the best)``. ``keep(model, history)``
     saves each new best before the next training, so that an interruption never loses it. A
@@ -386,7 +387,11 @@ def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
     scores = [o.get("score") for o in plain]
     if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
                               for s, o in zip(scores, plain))
-            or min(scores) <= good or max(scores) > ALIKE * min(scores)):
+            or min(scores) <= good or max(scores) > ALIKE * min(scores)
+            # another form served (a new-user check's chain: 0.045, 0.056, 0.042, then
+            # 0.0067 with --quadratic): the note would blame what was solved
+            or any(o.get("score") is not None and not o.get("failures")
+                   and o["score"] <= good for o in trainings)):
         return ""
     return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
             f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "

@@ -53,7 +53,8 @@ class Truth:
 
 #: The error figure's axis: each trajectory's error in standard deviations at each time
 #: (:func:`~metriplex._standardised.standardised_error_over_time`).
-STANDARDISED_LABEL = "error in standard deviations\n|D⁻¹(x − x_data)| / rms |D⁻¹(x_data − mean)|"
+STANDARDISED_LABEL = ("error in standard deviations\n"
+                      "|D⁻¹(x − x_data)| / rms |D⁻¹(x_data − mean)|")
 
 #: The figures that :func:`report_figures` writes, each as PNG, PDF and NPZ; and the one it
 #: adds where S is a sum of entropy variables (the learned temperatures).

@@ -285,12 +285,12 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
 
     ``ts``, ``errors``: ``(K, T)`` arrays (padded; NaN where a rollout stopped or a trajectory
     ended); ``failed_step``: ``(K,)``, the step at which each rollout failed, or -1. Left: each
-    trajectory's relative error, a failed one marked with an ``x`` at its last state before
+    trajectory's error (relative, or as ``ylabel`` says), a failed one marked with an ``x`` at its last state before
     the failure, and the title says how many failed; ``reference``: a ``(T,)`` error to compare
     trajectory ``trajectory``'s with (e.g. the true model's under the same scheme), dashed and
-    named ``reference_label``; ``ylabel`` says what the errors are. Right (with ``per_variable``, a dict of
-    ``(T,)`` errors of trajectory ``trajectory``): each variable's error, the ``max_labels``
-    largest named in a legend outside the axes. Only finite positive values are drawn, errors
+    named ``reference_label``; ``ylabel`` says what the errors are. Right (with
+    ``per_variable``, a dict of ``(T,)`` errors of trajectory ``trajectory``): each variable's
+    error, the ``max_labels`` largest named in a legend outside the axes. Only finite positive values are drawn, errors
     above :data:`ERROR_CEILING` at it."""
     ts = np.asarray(ts, dtype=np.float64)
     errors = np.asarray(errors, dtype=np.float64)
