@@ -9,7 +9,7 @@ import pytest
 import metriplex as mx
 from metriplex import MetriplexError, TrainingDiverged
 from metriplex._train import History
-from metriplex.app import _repeats
+from metriplex.app import _repeats, _trainings_note
 from metriplex.app.config import RunConfig, preset, validate
 from metriplex.app.runs import train_run
 
@@ -222,7 +222,7 @@ def test_a_training_with_other_settings_says_so_and_its_outcome_keeps_them(tmp_p
     err = capsys.readouterr().err
     assert "training 2 of at most 3 from another initialisation" in err
     assert "training 3 of at most 3 with --friction exchange" in err
-    note = _repeats.trainings_note({"trainings": [o.to_json() for o in outcomes],
+    note = _trainings_note.trainings_note({"trainings": [o.to_json() for o in outcomes],
                                     "kept_training": chosen})
     assert note.startswith("kept training 3 of 3, with --friction exchange (")
     assert "0.1 [--friction exchange]" in note
@@ -283,7 +283,7 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
                 + ([{"score": 0.248, "failures": 0, "change": change}] if change else []),
                 "kept_training": 0}
 
-    note = _repeats.trainings_note(outcomes(0.255, 0.304, 0.258, change="--quadratic"))
+    note = _trainings_note.trainings_note(outcomes(0.255, 0.304, 0.258, change="--quadratic"))
     assert "3 trainings from other initialisations did alike (scores within 1.2x" in note
     assert "too few trajectories" in note and "more of the structure" in note
     solved = outcomes(0.045, 0.056, 0.042, change="--quadratic")
@@ -293,7 +293,7 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
                    outcomes(0.015, 0.016, 0.017),       # good ones
                    outcomes(0.25, 0.26, failures=1),    # failing rollouts
                    outcomes(0.25)):                     # one training: no note at all
-        assert "did alike" not in _repeats.trainings_note(unlike)
+        assert "did alike" not in _trainings_note.trainings_note(unlike)
 
 
 def test_on_noisy_held_out_states_a_score_at_the_noise_is_good(tmp_path, capsys):
@@ -326,4 +326,16 @@ def test_on_noisy_held_out_states_a_score_at_the_noise_is_good(tmp_path, capsys)
     # The note on trainings that did alike judges them by the run's own limit.
     header = {"trainings": [{"score": s, "failures": 0, "change": ""} for s in (0.064, 0.07)],
               "kept_training": 0, "decided": {"good_score": good}}
-    assert "did alike" not in _repeats.trainings_note(header)
+    assert "did alike" not in _trainings_note.trainings_note(header)
+
+
+def test_a_time_budget_that_cuts_the_trainings_short_is_said(tmp_path, capsys):
+    # A new-user check's max_minutes ended train_run in its second training, and nothing said
+    # so in Python (no final line there); the kept first training had converged.
+    cut = _history(0.3, converged=False, stopped="time budget reached (240 s)")
+    model, _, outcomes, chosen, calls, _ = _run([_history(0.4), cut, _history(0.01)], tmp_path)
+    assert [r for r, _ in calls] == [0, 1] and chosen == 1
+    err = capsys.readouterr().err
+    assert "the time budget ended training 2 of at most 3 before it converged" in err
+    _run([_history(0.01, converged=False, stopped="time budget reached (240 s)")], tmp_path)
+    assert "time budget ended" not in capsys.readouterr().err  # good: nothing to add

@@ -100,7 +100,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
     from ._data_checks import operators_note, split_in_time
     from ._lock import RunLock
     from ._selection import check_selection, choose_trajectories
-    from ._repeats import trainings_note
+    from ._trainings_note import trainings_note
     from .config import hold_energy_on, reversible_first_on, validate
     from ..io import read
     from .runs import (RunData, check_run_folder, evaluate_run, run_config, train_parts,

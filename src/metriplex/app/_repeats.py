@@ -320,6 +320,12 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
     if best is None:
         assert diverged is not None
         raise diverged
+    cut = [i for i, o in enumerate(outcomes) if o.stopped.startswith("time budget")]
+    if cut and not best[2].good(good):  # said: a Python caller gets no final line
+        print(f"repeats: the time budget ended training {cut[-1] + 1} of at most {repeats} "
+              f"before it converged; the best so far (training {chosen + 1}) is kept, not "
+              "judged good: allow more time (--resume with a larger --max-minutes)",
+              file=sys.stderr)
     return best[0], best[1], outcomes, chosen
 
 
@@ -348,52 +354,3 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
            "choose)" if change else "from another initialisation")
     return (f"repeats: {why}; training {r + 1} of at most {repeats} {how} (--repeats 1: one "
             "training only)")
-
-
-def trainings_note(header: dict) -> str:
-    """The words train's final line adds where more than one training ran, from the run's
-    ``config.json`` (``header``; its ``trainings`` and ``kept_training``); else ``""``."""
-    trainings = header.get("trainings") or []
-    if len(trainings) < 2:
-        return ""
-    scores = ", ".join("diverged" if o.get("diverged") else (
-        "not judged" if o.get("score") is None else f"{o['score']:.3g}")
-        + (f" ({o['failures']} failed)" if o.get("failures") else "")
-        + (f" [{o['change']}]" if o.get("change") else "") for o in trainings)
-    kept = header.get("kept_training", 0)
-    change = trainings[kept].get("change") if kept < len(trainings) else None
-    return (f"kept training {kept + 1} of {len(trainings)}"
-            + (f", with {change}" if change else "") + " "
-            f"(their held-out scores during training: the error over the rollout check's "
-            f"windows, in units of the data's spread, not the relative L2 below: {scores})"
-            + _alike_note(trainings, (header.get("decided") or {}).get("good_score")
-                          or GOOD_SCORE))
-
-
-#: Trainings from other initialisations whose held-out scores lie within this factor of each
-#: other did alike: where all are poor, the start is not what limits them. A new-user check's
-#: two coupled spins (32 trajectories): 0.255, 0.304, 0.258, and one training met the bar
-#: with 128 trajectories; the oscillator network's 0.207, 0.203, 0.175, whose energy lacked a
-#: form (``--quadratic`` met it); the pendulum's seeds, which another start did help: factors
-#: of 7 and 10 (docs/zoo.md).
-ALIKE = 1.5
-
-
-def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
-    """Where two or more trainings from other initialisations (no changed settings) were all
-    judged, none failing or good, with scores within :data:`ALIKE` of each other: that the
-    limit is the data or the model's form, not the start."""
-    plain = [o for o in trainings if not o.get("change")]
-    scores = [o.get("score") for o in plain]
-    if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
-                              for s, o in zip(scores, plain))
-            or min(scores) <= good or max(scores) > ALIKE * min(scores)
-            # another form served (a new-user check's chain: 0.045, 0.056, 0.042, then
-            # 0.0067 with --quadratic): the note would blame what was solved
-            or any(o.get("score") is not None and not o.get("failures")
-                   and o["score"] <= good for o in trainings)):
-        return ""
-    return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
-            f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "
-            "what limits them: the data (too few trajectories near the states to predict: give "
-            "more) or what the model can express (give more of the structure you know)")

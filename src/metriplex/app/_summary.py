@@ -26,7 +26,7 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     ``first_stage``: a first stage ran before the main one (``--reversible-first``; with
     ``held_stage``, ``--hold-energy``'s too); their steps are on the lines they printed, and
     ``seconds`` counts all. ``trainings``: what ``--repeats`` did, where it trained more than
-    once (:func:`~metriplex.app._repeats.trainings_note`)."""
+    once (:func:`~metriplex.app._trainings_note.trainings_note`)."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
     timed = ended.startswith("time budget")
