@@ -116,6 +116,12 @@ def test_a_variable_has_one_colour_in_every_figure_and_the_bold_trajectory_is_na
     plt.close(fig)
     assert {k: colours[k] for k in names} == {k: again[k] for k in names}
     assert len({colours[k] for k in names}) == 3
+    # None named is grey, the colour of the unnamed ones (matplotlib's C7 is).
+    many = {f"v{i}": np.full(T, 1.0 + i) for i in range(9)}
+    fig = plots.residual_over_time(ts[1:], np.stack([v[1:] for v in many.values()], 1), list(many))
+    named = [line.get_color() for line in fig.axes[0].get_lines() if line.get_label() in many]
+    plt.close(fig)
+    assert "C7" not in named and len(set(named)) == len(named)
 
 
 def _blow_up(c):

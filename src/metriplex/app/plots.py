@@ -88,9 +88,9 @@ def _per_variable_lines(ax, ts, per_variable: dict, max_labels: int, ceiling=Non
     named = _top_k(per_variable, max_labels)
     rest = [n for n in per_variable if n not in named]
     for i, name in enumerate(per_variable):
-        if name in named:
+        if name in named:  # C7 is grey, the colour of the unnamed ones: skipped
             ax.semilogy(ts, _positive(per_variable[name], ceiling), lw=0.8, alpha=0.8,
-                        color=f"C{i % 10}", label=name)
+                        color=f"C{(0, 1, 2, 3, 4, 5, 6, 8, 9)[i % 9]}", label=name)
     for j, name in enumerate(rest):
         ax.semilogy(ts, _positive(per_variable[name], ceiling), lw=0.5, color="0.7",
                     label=f"other {len(rest)} variables" if j == 0 else None, zorder=0)
@@ -285,12 +285,12 @@ def rollout_errors(ts: ArrayLike, errors: ArrayLike, *, failed_step: ArrayLike |
 
     ``ts``, ``errors``: ``(K, T)`` arrays (padded; NaN where a rollout stopped or a trajectory
     ended); ``failed_step``: ``(K,)``, the step at which each rollout failed, or -1. Left: each
-    trajectory's error (relative, or as ``ylabel`` says), a failed one marked with an ``x`` at its last state before
-    the failure, and the title says how many failed; ``reference``: a ``(T,)`` error to compare
-    trajectory ``trajectory``'s with (e.g. the true model's under the same scheme), dashed and
-    named ``reference_label``; ``ylabel`` says what the errors are. Right (with
-    ``per_variable``, a dict of ``(T,)`` errors of trajectory ``trajectory``): each variable's
-    error, the ``max_labels`` largest named in a legend outside the axes. Only finite positive values are drawn, errors
+    trajectory's error (relative, or as ``ylabel`` says), a failed one marked with an ``x`` at
+    its last state before the failure, and the title says how many failed; ``reference``: a
+    ``(T,)`` error to compare trajectory ``trajectory``'s with (e.g. the true model's under the
+    same scheme), dashed and named ``reference_label``. Right (with ``per_variable``, a dict of
+    ``(T,)`` errors of trajectory ``trajectory``): each variable's error, the ``max_labels``
+    largest named in a legend outside the axes. Only finite positive values are drawn, errors
     above :data:`ERROR_CEILING` at it."""
     ts = np.asarray(ts, dtype=np.float64)
     errors = np.asarray(errors, dtype=np.float64)
