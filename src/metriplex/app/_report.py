@@ -141,7 +141,7 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
     # Errors of every trajectory, standardised as evaluate's rollout_error_standardised (which
     # no offset shrinks): NaN after a failure (never a number standing for it).
     errors = np.full(all_pred.shape[:2], np.nan)
-    mean, d, _ = state_statistics(_states(xs, lengths))
+    mean, d, _ = state_statistics(data.x)  # the states rolled out, as evaluate's figure
     for j, Tj in enumerate(lengths):
         errors[j, :Tj] = standardised_error_over_time(all_pred[j, :Tj], xs[j, :Tj], mean, d)
     scale = state_scale(data.x)

@@ -38,15 +38,16 @@ ALIKE = 1.5
 
 def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
     """Where two or more trainings from other initialisations (no changed settings) were all
-    judged, none failing or good, with scores within :data:`ALIKE` of each other: that the
-    limit is the data or the model's form, not the start."""
+    judged, none failing, with scores within :data:`ALIKE` of each other, and no training of
+    the run was good (at ``good``): that the limit is the data or the model's form, not the
+    start."""
     plain = [o for o in trainings if not o.get("change")]
     scores = [o.get("score") for o in plain]
     if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
                               for s, o in zip(scores, plain))
-            or min(scores) <= good or max(scores) > ALIKE * min(scores)
-            # another form served (a new-user check's chain: 0.045, 0.056, 0.042, then
-            # 0.0067 with --quadratic): the note would blame what was solved
+            or max(scores) > ALIKE * min(scores)
+            # none good, of another form either (a new-user check's chain: 0.045, 0.056,
+            # 0.042, then 0.0067 with --quadratic): the note would blame what was solved
             or any(o.get("score") is not None and not o.get("failures")
                    and o["score"] <= good for o in trainings)):
         return ""
