@@ -26,6 +26,18 @@ def save(path: str | os.PathLike, tree: Any, meta: dict) -> None:
         f.write(buf.getvalue())
 
 
+def read_meta(path: str | os.PathLike) -> dict:
+    """The JSON header of the checkpoint at ``path`` (its step ``done``, ``history``, ...),
+    without its arrays; ``OSError`` or ``ValueError`` where it cannot be read as one."""
+    with open(path, "rb") as f:
+        if f.read(len(MAGIC)) != MAGIC:
+            raise ValueError(f"{str(path)!r} is not a metriplex checkpoint (bad magic bytes)")
+        meta = json.loads(f.readline())
+    if not isinstance(meta, dict):
+        raise ValueError(f"{str(path)!r} has no checkpoint header")
+    return meta
+
+
 def load(path: str | os.PathLike, like: Any) -> tuple[Any, dict]:
     path = Path(path)
     if not path.exists():

@@ -4,7 +4,6 @@ split."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -109,11 +108,10 @@ def spent_seconds(out: Path) -> float:
 def _checkpoint_meta(path: Path) -> dict:
     """A checkpoint's header (its step ``done`` and ``history``), ``{}`` where it cannot be
     read."""
+    from .._checkpoint import read_meta
+
     try:
-        with open(path, "rb") as f:
-            f.readline()  # the magic line
-            meta = json.loads(f.readline())
-        return meta if isinstance(meta, dict) else {}
+        return read_meta(path)
     except (OSError, ValueError):
         return {}
 
