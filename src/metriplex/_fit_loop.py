@@ -22,7 +22,7 @@ from ._errors import TrainingDiverged
 from ._interrupt import CtrlC
 from ._optimizers import annealing, learning_rate_of, with_learning_rate
 from ._train import History, TrainState, make_lbfgs_chunk, spread
-from ._progress import TIMED_BAR, progress_bar
+from ._progress import CAPPED_BAR, TIMED_BAR, progress_bar
 from ._validate import rollout_score
 
 if TYPE_CHECKING:
@@ -184,6 +184,8 @@ class FitLoop:
         postfix = dict(loss=f"{tr_total:.3e}", valid=f"{va_total:.3e}")
         if ev.windows is not None:
             postfix["rollout"] = f"{score:.3g}" + (f" ({failures} failed)" if failures else "")
+        if stopping is not None and self.adjustable:  # how far the stopping rule has come
+            postfix["lr_cuts"] = f"{state.cuts}/{stopping.cuts}"
         if self.max_seconds is not None:  # the bar's own estimate runs to the step cap
             postfix["time_left"] = f"{max(self.max_seconds - history.time[-1], 0.0):.0f}s"
         self.bar.set_postfix(refresh=False, **postfix)  # redrawn with the bar, as often as it is
@@ -260,12 +262,16 @@ class FitLoop:
         state, history = self.state, self.history
         self.start = time.perf_counter() - (history.time[-1] if history.time else 0.0)
         evaluations = 0
-        # Under a time budget the time left is the postfix's: the bar's own estimate of the
-        # remaining time runs to the step cap (hours at a few steps a second).
-        timed = {} if self.max_seconds is None else {"bar_format": TIMED_BAR}
+        # The bar's own estimate of the time left runs to the step cap (hours at a few steps
+        # a second): under a time budget the postfix says the time left instead, and where a
+        # stopping rule ends the run the estimate is said to be the cap's.
+        formats = {} if self.stopping is None and self.patience is None else \
+            {"bar_format": CAPPED_BAR}
+        if self.max_seconds is not None:
+            formats = {"bar_format": TIMED_BAR}
         self.bar = progress_bar(total=self.steps, initial=state.done,
                                 disable=not self.progress, desc="fit", unit="step", leave=False,
-                                **timed)
+                                **formats)
         with CtrlC() as ctrl_c:
             try:
                 finished = resume and (

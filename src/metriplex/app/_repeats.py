@@ -10,6 +10,7 @@ repeated only where they say the model is poor, and a good first training costs 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
@@ -22,6 +23,7 @@ import jax.random as jr
 
 from .._errors import TrainingDiverged
 from .._model import with_dtype
+from .._progress import progress_label
 from .._units import Units
 from ..data import Trajectories, noise_level
 from ..losses import Loss
@@ -30,7 +32,7 @@ from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
 from ._option import option
 from ._resume import checkpoint_seconds, resuming_line
 from ._stages import before_main, left_of
-from .config import RunConfig
+from .config import RunConfig, reversible_first_on
 
 if TYPE_CHECKING:
     from jax.typing import DTypeLike
@@ -188,6 +190,14 @@ class Training:
         return ALTERNATIVE_ENERGY
 
     def __call__(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
+        if self.repeats <= 1:
+            return self.train_one(r, resumed)
+        with progress_label(f"training {r + 1} of at most {self.repeats}"):
+            return self.train_one(r, resumed)
+
+    def train_one(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
+        """Training ``r`` (resumed from its checkpoints where ``resumed``): its stages before
+        the main one, then the main one."""
         config, train, valid = self.config_of(r), self.train, self.valid
         loss = self.loss if config is self.config else build_loss(config, self.units, train)
         m_key, f_key = self.keys if r == 0 else tuple(jr.fold_in(k, r) for k in self.keys)
@@ -217,16 +227,18 @@ class Training:
         left = left_of(self.budget, self.began)
         if left is not None and main:
             left += checkpoint_seconds(checkpoint_path(self.out, r))
-        return fit(
-            with_dtype(model, self.dtype), train, loss=loss, validation=valid,
-            max_seconds=left, scale=self.units.rate,
-            dtype=self.dtype, progress=self.progress,
-            checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
-                                  resume=main),
-            data_parallel=config.data_parallel,
-            finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
-            input_noise=input_noise_of(config, train, self.constant), key=f_key,
-            **fit_settings(config))
+        with progress_label("main stage") if reversible_first_on(config) \
+                else contextlib.nullcontext():
+            return fit(
+                with_dtype(model, self.dtype), train, loss=loss, validation=valid,
+                max_seconds=left, scale=self.units.rate,
+                dtype=self.dtype, progress=self.progress,
+                checkpoint=Checkpoint(checkpoint_path(self.out, r), every=config.checkpoint_every,
+                                      resume=main),
+                data_parallel=config.data_parallel,
+                finish=LBFGSFinish(config.lbfgs_steps) if config.lbfgs_steps else None,
+                input_noise=input_noise_of(config, train, self.constant), key=f_key,
+                **fit_settings(config))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -16,6 +16,7 @@ import jax
 
 from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
+from .._progress import progress_label
 from .._units import Units
 from ..data import Trajectories
 from ..losses import Loss
@@ -164,9 +165,10 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                      label="reversible first", train=train, valid=valid,
                                      units=units, constant=constant, dtype=dtype, loss=loss,
                                      max_seconds=max_seconds)
-    fitted, stopped = _stage(start, first, train, valid, loss=loss, units=units, dtype=dtype,
-                             key=key, progress=progress, checkpoint=saved,
-                             max_seconds=left_of(max_seconds, began))
+    with progress_label("first stage"):
+        fitted, stopped = _stage(start, first, train, valid, loss=loss, units=units,
+                                 dtype=dtype, key=key, progress=progress, checkpoint=saved,
+                                 max_seconds=left_of(max_seconds, began))
     print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
     if config.poisson in LEARNED_POISSON:
@@ -203,9 +205,10 @@ def friction_to_energy(model: GenericModel, config: RunConfig, train: Trajectori
     # holds arrays.
     held = eqx.tree_at(lambda m: m.energy, model, Known(lambda x: energy(x)))
     began = time.perf_counter()
-    fitted, stopped = _stage(held, config, train, valid, loss=loss, units=units, dtype=dtype,
-                             key=key, progress=progress, max_seconds=max_seconds,
-                             checkpoint=checkpoint)
+    with progress_label("held stage"):
+        fitted, stopped = _stage(held, config, train, valid, loss=loss, units=units,
+                                 dtype=dtype, key=key, progress=progress,
+                                 max_seconds=max_seconds, checkpoint=checkpoint)
     print(f"friction to the energy held: {stopped} ({time.perf_counter() - began:.0f} s)",
           file=sys.stderr)
     return eqx.tree_at(lambda m: m.energy, fitted, energy)
