@@ -73,6 +73,17 @@ def test_round_trip_equal_lengths(tmp_path, ext, uniform):
     _same(mx.read(tmp_path / f"d.{ext}"), data)
 
 
+def test_printed_trajectories_are_summarised_not_dumped():
+    # A new-user check printed mx.read(...) and got every array in full.
+    x = np.zeros((200, 9))
+    data = Trajectories.from_list([(np.linspace(0, 20, 200), x), (np.linspace(0, 2, 11), x[:11])],
+                                  names=[f"q{i}" for i in range(9)])
+    assert repr(data) == ("Trajectories(2 trajectories of 11 to 200 samples; 9 variables "
+                          "(q0, q1, q2, q3, q4, q5, ...); t from 0 to 20)")
+    one = Trajectories.from_list([(np.arange(3.0), np.ones(3))])
+    assert repr(one) == "Trajectories(1 trajectory of 3 samples; 1 variable (x0); t from 0 to 2)"
+
+
 def test_write_is_dispatched_by_suffix_and_unknown_suffix_refused(tmp_path):
     data = _square()
     mx.write(tmp_path / "d.H5", data)

@@ -240,6 +240,20 @@ class Trajectories:
     def __len__(self) -> int:
         return len(self.ids)
 
+    def __repr__(self) -> str:
+        """A summary, not the arrays: ``Trajectories(32 trajectories of 201 samples; 9
+        variables (q1, q2, ...); t from 0 to 20)``; the arrays are ``.trajectory``, ``.t``,
+        ``.x``."""
+        lengths = self.lengths()
+        samples = (f"{lengths[0]}" if lengths.min() == lengths.max()
+                   else f"{lengths.min()} to {lengths.max()}")
+        names = ", ".join(self.names[:6]) + (", ..." if len(self.names) > 6 else "")
+        k = len(lengths)
+        return (f"Trajectories({k} trajector{'y' if k == 1 else 'ies'} of {samples} samples; "
+                f"{self.n} variable{'' if self.n == 1 else 's'}"
+                + (f" ({names})" if names else "")
+                + f"; t from {self.t.min():.4g} to {self.t.max():.4g})")
+
     def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         # Rows are sorted by trajectory id (see __post_init__), so each is one slice.
         _, starts, counts = np.unique(self.trajectory, return_index=True, return_counts=True)
