@@ -67,7 +67,7 @@ def test_run_folder_contents(oscillator_run):
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
     assert cfg["decided"] == {"confine": True, "reversible_first": True, "hold_energy": False,
                               "w_temperature": 1.0,
-                              "starts": 1, "residual_metric": "correlated",
+                              "starts": 1, "residual_metric": "correlated", "jacobi": "none",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
                               "patience": 20, "repeats": 4, "good_score": 0.02, "every": 1,
@@ -144,7 +144,7 @@ def test_train_refuses_to_overwrite_a_run(oscillator_run):
         (["--entropy", "sum:a"], r"comma-separated integer indices"),
         (["--friction", "learned"],
          r"--friction must be one of neural, exchange, local, zero, file; got 'learned'"),
-        (["--jacobi", "maybe"], r"--jacobi must be one of none, exact, stochastic"),
+        (["--jacobi", "maybe"], r"--jacobi must be one of auto, none, exact, stochastic"),
         (["--lr", "-1"], r"--lr must be > 0; got -1"),
         (["--validation", "1.5"], r"--validation must lie in \[0, 1\); got 1.5"),
         (["--degeneracy-at", "edges"], r"--degeneracy-at must be one of states, midpoints"),

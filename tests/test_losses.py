@@ -76,9 +76,14 @@ def test_the_command_line_names_are_parsed_into_objects_at_the_edge():
     assert t["FrictionDegeneracy"].at_midpoints is True
     t = terms(jacobi="exact")
     assert t["JacobiPenalty"] == mx.JacobiPenalty(mx.ExactJacobi())
+    # auto, the default: the exact penalty for a Lie-Poisson L (its Jacobi residual linear in
+    # the state, cheap), none for a network's L or a given one.
+    assert terms(poisson="lie-poisson")["JacobiPenalty"] == mx.JacobiPenalty(mx.ExactJacobi())
+    assert "JacobiPenalty" not in terms() and "JacobiPenalty" not in terms(poisson="zero")
+    assert "JacobiPenalty" not in terms(poisson="lie-poisson", jacobi="none")
     assert t["PoissonDegeneracy"].at_midpoints is False
     assert t["FrictionDegeneracy"].at_midpoints is False
-    with pytest.raises(mx.MetriplexError, match=r"--jacobi must be one of none, exact, "
+    with pytest.raises(mx.MetriplexError, match=r"--jacobi must be one of auto, none, exact, "
                                                 r"stochastic; got 'approximate'\."):
         terms(jacobi="approximate")
     with pytest.raises(mx.MetriplexError, match=r"--degeneracy-at must be one of states, "

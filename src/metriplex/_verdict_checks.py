@@ -50,14 +50,15 @@ UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the mot
                       "--friction zero.")
 
 
-#: What a "cannot tell" adds where the learned L failed the Jacobi check: a user asking "is it
-#: GENERIC?" of such a fit needs the means to ask it (found by running the verdict across the
-#: zoo: three of seven learned L were not Poisson). Only means that were measured to work are
+#: What a "cannot tell" adds where the learned L failed the Jacobi check (three of seven
+#: learned L of the zoo): the means to ask "is it GENERIC?". Only means measured to work are
 #: named: on oscillator-family the Jacobi penalty (--jacobi exact, weight 1 and 100) left the
 #: residual at 0.52 and 0.45 (docs/zoo.md, *The verdict across systems*).
-NOT_POISSON = ("The learned L is not a Poisson bivector there; training has no Jacobi penalty "
-               "by default, and the penalty (--jacobi exact) need not bring it under the "
-               "limit. Give L where it is known (--poisson canonical:K or file:L.npy); with "
+NOT_POISSON = ("The learned L is not a Poisson bivector there; a network's L trains with no "
+               "Jacobi penalty by default, and the penalty (--jacobi exact) need not bring it "
+               "under the limit. Give L where it is known (--poisson canonical:K or "
+               "file:L.npy); where L is linear in the state, --poisson lie-poisson (trained "
+               "with the exact penalty by default); with "
                "three variables, --poisson casimir3 builds it Poisson by construction; a "
                "known L that depends on the state (e.g. spins' cross products) in Python, "
                "metriplex.KnownPoisson(fn) in the model given to metriplex.fit (not saved "

@@ -19,7 +19,8 @@ ENTROPY_CHOICES = {k: v.help for k, v in ENTROPY.items()}
 POISSON_CHOICES = {k: v.help for k, v in POISSON.items()}
 FRICTION_CHOICES = {k: v.help for k, v in FRICTION.items()}
 JACOBI_CHOICES = {
-    "none": "none (default)",
+    "auto": "auto (default: exact with lie-poisson, none otherwise)",
+    "none": "none",
     "exact": "exact",
     "stochastic": "stochastic (random probes; see --jacobi-probes, --jacobi-samples)",
 }

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._errors import MetriplexError
-from ._build import residual_metric_of
+from ._build import jacobi_of, residual_metric_of
 from ._selection import format_ids
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
@@ -26,7 +26,7 @@ RESUME_MAY_CHANGE = ("max_minutes",)
 #: resumes with the option left out.
 DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
            "hold_energy": hold_energy_on, "w_temperature": temperature_weight,
-           "starts": starts_for, "residual_metric": residual_metric_of}
+           "starts": starts_for, "residual_metric": residual_metric_of, "jacobi": jacobi_of}
 
 
 def decisions(config: RunConfig) -> dict[str, Any]:

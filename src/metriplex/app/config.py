@@ -79,7 +79,7 @@ class RunConfig:
     friction: str = "neural"
     degeneracy: str = "auto"
     degeneracy_at: str = "states"
-    jacobi: str = "none"
+    jacobi: str = "auto"  # exact with lie-poisson, else none: _build.jacobi_of
     jacobi_probes: int = 1
     jacobi_samples: int | None = None
     features: str = "none"

@@ -6,7 +6,8 @@ the bracket on the dual of a Lie algebra with structure constants :math:`c` (the
 :math:`L(m) = -\varepsilon m` is one). It is the prior for rigid-body-like systems: far fewer
 parameters than a network, and exact extrapolation wherever the truth is Lie–Poisson. The
 Jacobi identity holds iff :math:`c` satisfies the Lie algebra's Jacobi identity; train with the
-Jacobi penalty (``--jacobi exact``) to get it.
+Jacobi penalty (``--jacobi exact``, the command line's default with ``--poisson lie-poisson``;
+in Python ``JacobiPenalty(ExactJacobi())`` in the loss) to get it.
 """
 
 from __future__ import annotations
