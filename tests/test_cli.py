@@ -72,6 +72,9 @@ def test_run_folder_contents(oscillator_run):
                               "exact_friction_degeneracy": True, "entropy_of": None,
                               "patience": 20, "repeats": 4, "good_score": 0.02, "every": 1,
                               "scheme": "cn", "coarse_steps": None}
+    # How each training ended is recorded however many ran (one here or more).
+    assert cfg["trainings"] and 0 <= cfg["kept_training"] < len(cfg["trainings"])
+    assert {"score", "stopped", "converged"} <= set(cfg["trainings"][cfg["kept_training"]])
     # The run released its folder, and every file has the user's umask (not mkstemp's 0600).
     assert not (run_dir / ".metriplex.lock").exists()
     mask = os.umask(0)

@@ -294,6 +294,13 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
                    outcomes(0.25, 0.26, failures=1),    # failing rollouts
                    outcomes(0.25)):                     # one training: no note at all
         assert "did alike" not in _trainings_note.trainings_note(unlike)
+    # Where none was good and they did not do alike, the note says that none was good (a
+    # new-user check read 0.0343, 0.0212, 0.035, 0.0207 as good ones); not where one was.
+    note = _trainings_note.trainings_note(outcomes(0.0343, 0.0212, 0.035, change="--quadratic"))
+    assert "did alike" not in note and "none scored under 0.02" in note, note
+    assert "none scored" not in _trainings_note.trainings_note(solved)
+    assert "none scored" not in _trainings_note.trainings_note(outcomes(0.015, 0.016, 0.017))
+    assert "none scored" not in _trainings_note.trainings_note(outcomes(0.25, 0.26, 0.27))
 
 
 def test_on_noisy_held_out_states_a_score_at_the_noise_is_good(tmp_path, capsys):

@@ -245,6 +245,10 @@ def test_a_learned_energy_that_drives_no_motion_is_reported_and_warned_about():
     heat = structure_residuals(get_system("heat-exchange").model,
                                generate("heat-exchange", trajectories=1, steps=5, seed=0).x)
     assert heat["reversible_share"] is None and structure_warnings(heat) == []
+    # The friction's smallest eigenvalue beside its largest: what the verdict's PSD check reads.
+    assert heat["friction_min_eigenvalue_relative"] == pytest.approx(
+        heat["friction_min_eigenvalue"] / heat["friction_max_eigenvalue"])
+    assert abs(heat["friction_min_eigenvalue_relative"]) < 1e-9
     assert "L is zero at every state" in heat["null_reasons"]["reversible_share"]
 
 

@@ -17,7 +17,9 @@ if TYPE_CHECKING:
 GAUGE = {
     "determined": "no gauge freedom where heat flows (L and S given): as accurate as the fit, "
                   "which noise on the data limits (no error bar drawn)",
-    "factor": "up to one common factor: L is learned, and (L/a, aE) give the same flow",
+    "factor": "up to E's factor: L is learned, and (L/a, aE) give the same flow; where the "
+              "motion conserves another quantity C (a Casimir), (L/F_E, F(E, C)) too, and the "
+              "factor then varies with the state",
     "ratios": "only their ratios are determined: with L = 0 their common scale and sign are "
               "not (-E gives the same flow)",
 }

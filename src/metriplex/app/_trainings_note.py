@@ -19,12 +19,23 @@ def trainings_note(header: dict) -> str:
         + (f" [{o['change']}]" if o.get("change") else "") for o in trainings)
     kept = header.get("kept_training", 0)
     change = trainings[kept].get("change") if kept < len(trainings) else None
+    good = (header.get("decided") or {}).get("good_score") or GOOD_SCORE
+    alike = _alike_note(trainings, good)
+    if not alike and not any(_good(o, good) for o in trainings):
+        # A new-user check's four scores, 0.0343, 0.0212, 0.035, 0.0207, were read as good.
+        alike = (f"; none scored under {good:.3g}, the score at which training stops "
+                 "repeating: the one kept is the best of them, not judged good")
     return (f"kept training {kept + 1} of {len(trainings)}"
             + (f", with {change}" if change else "") + " "
             f"(their held-out scores during training: the error over the rollout check's "
             f"windows, in units of the data's spread, not the relative L2 below: {scores})"
-            + _alike_note(trainings, (header.get("decided") or {}).get("good_score")
-                          or GOOD_SCORE))
+            + alike)
+
+
+def _good(outcome: dict, good: float) -> bool:
+    """Whether a training's outcome (``config.json``'s) was judged good at ``good``."""
+    return (outcome.get("score") is not None and not outcome.get("failures")
+            and outcome["score"] <= good)
 
 
 #: Trainings from other initialisations whose held-out scores lie within this factor of each
@@ -48,8 +59,7 @@ def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
             or max(scores) > ALIKE * min(scores)
             # none good, of another form either (a new-user check's chain: 0.045, 0.056,
             # 0.042, then 0.0067 with --quadratic): the note would blame what was solved
-            or any(o.get("score") is not None and not o.get("failures")
-                   and o["score"] <= good for o in trainings)):
+            or any(_good(o, good) for o in trainings)):
         return ""
     return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
             f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "

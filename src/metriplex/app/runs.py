@@ -260,14 +260,14 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     except TrainingDiverged as e:
         keep(e.model, e.history)
         raise
-    if len(outcomes) > 1:
-        kept = one.config_of(chosen)  # its friction or E's form can be another (config_for)
-        if kept is not config:
-            header["decided"] = {**header["decided"], "friction": kept.friction,
-                                 "quadratic": kept.quadratic, **decisions(kept)}
-            header["loss_terms"] = list(build_loss(kept, units, train).names)
-        write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
-                                         "kept_training": chosen})
+    kept = one.config_of(chosen)  # its friction or E's form can be another (config_for)
+    if kept is not config:
+        header["decided"] = {**header["decided"], "friction": kept.friction,
+                             "quadratic": kept.quadratic, **decisions(kept)}
+        header["loss_terms"] = list(build_loss(kept, units, train).names)
+    # How each training ended, one or several (a new-user check looked for it after one).
+    write_json(out / "config.json", {**header, "trainings": [o.to_json() for o in outcomes],
+                                     "kept_training": chosen})
     seconds = time.perf_counter() - began  # every stage and training
     keep(model, history, train_seconds=seconds)
     if not history.stopped.startswith("interrupted"):
