@@ -24,7 +24,8 @@ def test_every_exported_block_states_whether_it_uses_the_gradient(base):
     exact = {c.__name__ for c in blocks if c.uses_gradient}
     # The exactly degenerate blocks read the gradient, and so may the masked ones, which pass
     # it (masked) to the block they wrap; all others must not claim to.
-    expected = ({"ProjectedSkewMLPPoisson", "EntropyCasimirPoisson3", "MaskedPoisson"}
+    expected = ({"ProjectedSkewMLPPoisson", "ProjectedLiePoisson", "EntropyCasimirPoisson3",
+                 "MaskedPoisson"}
                 if base is st.AbstractPoisson
                 else {"ProjectedCholeskyFriction", "ExchangeFriction", "LocalFriction",
                       "MaskedFriction"})

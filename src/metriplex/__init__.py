@@ -84,6 +84,7 @@ from .structure import ExchangeFriction as ExchangeFriction
 from .structure import ConstantPoisson as ConstantPoisson
 from .structure import Confinement as Confinement
 from .structure import LiePoisson as LiePoisson
+from .structure import ProjectedLiePoisson as ProjectedLiePoisson
 from .structure import Lattice as Lattice
 from .structure import LocalFriction as LocalFriction
 from .structure import LocalPotential as LocalPotential

@@ -265,10 +265,9 @@ class FitLoop:
         # The bar's own estimate of the time left runs to the step cap (hours at a few steps
         # a second): under a time budget the postfix says the time left instead, and where a
         # stopping rule ends the run the estimate is said to be the cap's.
-        formats = {} if self.stopping is None and self.patience is None else \
-            {"bar_format": CAPPED_BAR}
-        if self.max_seconds is not None:
-            formats = {"bar_format": TIMED_BAR}
+        formats = ({"bar_format": TIMED_BAR} if self.max_seconds is not None else
+                   {} if self.stopping is None and self.patience is None else
+                   {"bar_format": CAPPED_BAR})
         self.bar = progress_bar(total=self.steps, initial=state.done,
                                 disable=not self.progress, desc="fit", unit="step", leave=False,
                                 **formats)

@@ -21,7 +21,7 @@ from ..structure.confinement import Confinement
 from ..structure.constant import ConstantFriction, ConstantPoisson
 from ..structure.friction import (CholeskyFriction, ExchangeFriction, ProjectedCholeskyFriction,
                                   ZeroFriction)
-from ..structure.lie_poisson import LiePoisson
+from ..structure.lie_poisson import LiePoisson, ProjectedLiePoisson
 from ..structure.local import Lattice, LocalFriction, LocalPotential
 from ..structure.poisson import CanonicalPoisson, ZeroPoisson
 from ..structure.potential import FeatureMap, MLPPotential, SumOf, ZeroPotential
@@ -220,7 +220,8 @@ POISSON = {
     "casimir3": Spelling("casimir3 (n = 3, Jacobi exact)",
                          learned=_network_poisson("casimir3", "casimir3-entropy"), check=_three),
     "lie-poisson": Spelling("lie-poisson (learned, linear in the state)",
-                            learned=lambda b: LiePoisson(b.n, scaling=b.scaling, key=b.key)),
+                            learned=lambda b: (ProjectedLiePoisson if b.exact else LiePoisson)(
+                                b.n, scaling=b.scaling, key=b.key)),
     "file": Spelling("file:PATH (a constant L from .npy, .npz or .mat)",
                      given=lambda a, n: _from_file(ConstantPoisson, a, "L", n)),
 }

@@ -105,20 +105,25 @@ def entropy_variables(config: ThermalFields) -> tuple[int, ...]:
 DEGENERACY_MODES = ("auto", "soft", "exact")
 
 #: The learned L that ``exact`` builds exactly degenerate: ``neural`` as ``projected-neural``,
-#: ``casimir3`` as ``casimir3-entropy`` (S its Casimir; not where S = 0, which would leave L = 0).
-#: ``lie-poisson`` has no such form: ``exact`` is refused with it.
-PROJECTABLE_POISSON = ("neural", "casimir3")
+#: ``casimir3`` as ``casimir3-entropy`` (S its Casimir; not where S = 0, which would leave L = 0),
+#: ``lie-poisson`` as ``projected-lie-poisson`` beside a sum of entropy variables only (whose
+#: constant gradient keeps L linear); ``exact`` is refused with it beside another S.
+PROJECTABLE_POISSON = ("neural", "casimir3", "lie-poisson")
 
 
 def exact_blocks(config: ThermalFields) -> tuple[bool, bool]:
     """Whether the learned ``(L, M)`` are built exactly degenerate (see ``DEGENERACY_MODES``)."""
+    summed = option(config.entropy).kind == "sum"
     if config.degeneracy == "exact":
         kind = option(config.poisson).kind
-        return kind == "neural" or (kind == "casimir3" and config.entropy != "zero"), True
+        return kind == "neural" or (kind == "casimir3" and config.entropy != "zero") or (
+            kind == "lie-poisson" and summed), True
     by_construction = option(config.friction).kind in EXACT_FRICTIONS  # in any mode
     if config.degeneracy == "soft":
         return False, by_construction
-    return (config.poisson == "neural" and option(config.entropy).kind == "sum",
+    # Not lie-poisson, which exact projects beside a sum (linear still): measured less
+    # accurate on two systems (docs/zoo.md, *New-user check 21*).
+    return (config.poisson == "neural" and summed,
             by_construction or (config.friction == "neural" and reversible_first_on(config)))
 
 

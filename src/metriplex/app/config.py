@@ -192,12 +192,14 @@ def validate(config: RunConfig, n: int) -> None:
     if config.constant not in ("auto", "none"):
         _indices(config.constant, n, "--constant")
     _choice(config.degeneracy, DEGENERACY_MODES, "--degeneracy")
-    if config.degeneracy == "exact" and option(config.poisson).kind == "lie-poisson":
+    if config.degeneracy == "exact" and option(config.poisson).kind == "lie-poisson" \
+            and option(config.entropy).kind != "sum":
         raise MetriplexError(
             "--degeneracy exact builds a learned L with L grad S = 0, which a Lie-Poisson L "
-            "(linear in the state) cannot be in general; got --poisson lie-poisson. Use "
-            "--degeneracy auto (the default) or soft with it (L grad S = 0 a penalty), or "
-            "--poisson neural or casimir3 with --degeneracy exact."
+            "(linear in the state) cannot be beside a learned S; got --poisson lie-poisson "
+            f"with --entropy {config.entropy}. Give S as a sum of entropy variables "
+            "(--entropy sum:I,J), use --degeneracy auto (the default) or soft (L grad S = 0 "
+            "a penalty), or --poisson neural or casimir3 with --degeneracy exact."
         )
     _choice(config.degeneracy_at, DEGENERACY_POINTS, "--degeneracy-at")
     _choice(config.residual_metric, RESIDUAL_METRICS, "--residual-metric")

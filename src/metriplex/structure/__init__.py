@@ -15,6 +15,7 @@ from .poisson import CanonicalPoisson as CanonicalPoisson
 from .casimir import CasimirPoisson3 as CasimirPoisson3
 from .casimir import EntropyCasimirPoisson3 as EntropyCasimirPoisson3
 from .lie_poisson import LiePoisson as LiePoisson
+from .lie_poisson import ProjectedLiePoisson as ProjectedLiePoisson
 from .local import Lattice as Lattice
 from .local import LocalFriction as LocalFriction
 from .local import LocalPotential as LocalPotential

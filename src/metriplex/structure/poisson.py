@@ -186,8 +186,23 @@ class KnownPoisson(AbstractFunctionMatrix, AbstractPoisson):
 # -- exactly degenerate variant ----------------------------------------------------------------
 
 
+class AbstractProjectedPoisson(AbstractProjected, AbstractPoisson):
+    r"""A learned :math:`A(x)` of the family ``network`` projected against :math:`\nabla S`:
+    :math:`L = Q A Q^\top` with :math:`L\nabla S = 0` (:class:`ProjectedSkewMLPPoisson` says
+    how)."""
+
+    def __call__(self, x: State, grad_entropy: State) -> Matrix:
+        A = self.base(x)
+        g_hat, u_hat = self._projector(grad_entropy, x.dtype)
+        # L = K - K^T with K = A/2 - b u^T. Not A - (W - W^T): the compiler may fuse one of the
+        # two products of W - W^T into an FMA and break exact antisymmetry; each K_ij is one
+        # deterministic expression, so K_ij - K_ji = -(K_ji - K_ij) exactly.
+        K = 0.5 * A - jnp.outer(A @ g_hat, u_hat)
+        return K - K.T
+
+
 @register("poisson", "projected-neural")
-class ProjectedSkewMLPPoisson(AbstractProjected, AbstractPoisson):
+class ProjectedSkewMLPPoisson(AbstractProjectedPoisson):
     r"""Learned :math:`L` with :math:`L\nabla S = 0` by construction: :math:`L = Q A Q^\top`.
 
     :math:`A(x)` is a :class:`SkewMLPPoisson` (same network, same normalisation congruence
@@ -229,12 +244,3 @@ class ProjectedSkewMLPPoisson(AbstractProjected, AbstractPoisson):
     network: ClassVar[type] = SkewMLPPoisson
 
     uses_gradient: ClassVar[bool] = True
-
-    def __call__(self, x: State, grad_entropy: State) -> Matrix:
-        A = self.base(x)
-        g_hat, u_hat = self._projector(grad_entropy, x.dtype)
-        # L = K - K^T with K = A/2 - b u^T. Not A - (W - W^T): the compiler may fuse one of the
-        # two products of W - W^T into an FMA and break exact antisymmetry; each K_ij is one
-        # deterministic expression, so K_ij - K_ji = -(K_ji - K_ij) exactly.
-        K = 0.5 * A - jnp.outer(A @ g_hat, u_hat)
-        return K - K.T
