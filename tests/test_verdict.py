@@ -807,6 +807,32 @@ def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():
     assert v["outcome"] == NOT_CONSISTENT, v["statement"]
     assert any(w.startswith("second law") for w in v["violations"])
     assert v["statement"].endswith(GIVEN_ENTROPY_FALLS + " " + MISSING_VARIABLE)
+    given = [r for r in v["reasons"] if r["name"] == "given_entropy"][0]
+    assert given["passed"] is False and given["value"] > 0.5, given
+    # The same data, unflipped: the given S never falls, and the check passes.
+    v = verdict(system.model, data, report=mx.evaluate(system.model, data, scheme=mx.RK4()),
+                converged=True, reference=train_reference(data, steps=200, width=16))
+    given = [r for r in v["reasons"] if r["name"] == "given_entropy"][0]
+    assert given["passed"] is True and given["value"] == 0.0, given
+
+
+def test_data_that_decrease_a_given_entropy_are_not_consistent_whatever_else():
+    # A new-user check's heated oscillator whose bath leaks heat was "consistent" (residual
+    # ratio 1.9) while the S it gave fell on 62 % of the held-out pairs: the pairs alone show
+    # that no GENERIC model with that S fits them, so neither a passing ratio nor evidence
+    # that is not sound (here an unconverged training) makes it "consistent" or "cannot tell".
+    from metriplex._verdict_outcome import _given_entropy_check, _outcome
+
+    falls = _given_entropy_check({"entropy_decreasing_fraction": 0.62}, 0.1, given=True)
+    assert falls["passed"] is False and falls["effect"] == NOT_CONSISTENT
+    unconverged = {"name": "training_converged", "passed": False}
+    assert _outcome([falls], 1.9, True, False) == NOT_CONSISTENT
+    assert _outcome([falls, unconverged], 1.9, False, False) == NOT_CONSISTENT
+    assert _outcome([unconverged], 1.9, False, False) == CANNOT_TELL
+    within = _given_entropy_check({"entropy_decreasing_fraction": 0.05}, 0.1, given=True)
+    assert within["passed"] is True
+    learned = _given_entropy_check({"entropy_decreasing_fraction": 0.62}, 0.1, given=False)
+    assert learned["passed"] is None and learned["value"] is None
 
 
 def test_a_check_failed_by_another_rule_within_its_limit_does_not_read_as_passing():

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from ._reference import _finite
 from ._verdict_checks import (CANNOT_TELL, CONSISTENT, NOT_CONSISTENT, _EVIDENCE,
-                              _SYMPTOMS)
+                              _SYMPTOMS, _reason)
 
 
 def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool | None,
@@ -20,7 +21,9 @@ def _outcome(failed: list[dict[str, Any]], ratio: float | None, converged: bool 
     # symptoms of the same misfit, not a lack of evidence (a damped oscillator fitted as
     # conservative: ratio 37, "cannot tell" before).
     misfit = any(r["name"] == "residual_ratio" for r in failed)
-    if any(r["name"] in _EVIDENCE for r in failed) or (ratio is None):
+    if any(r["name"] == "given_entropy" for r in failed):  # the data break it, not the fit
+        outcome = NOT_CONSISTENT
+    elif any(r["name"] in _EVIDENCE for r in failed) or (ratio is None):
         outcome = CANNOT_TELL
     elif misfit and ((converged is True and far)
                      or not any(r["name"] in _SYMPTOMS for r in failed)):
@@ -61,3 +64,26 @@ def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None
         laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "
                     f"{', '.join(worst)}")
     return laws
+
+
+def _accuracy(report: dict[str, Any]) -> str:
+    """What a "consistent" adds of the model's accuracy, which it does not judge (a new-user
+    check read "consistent, all 14 checks pass" of rollouts 14 % off)."""
+    err = _finite(report.get("rollout_error_standardised_mean"))
+    return ("" if err is None else f" That is the structure, not the accuracy: the rollouts "
+            f"err by {err:.3g} in standard deviations (rollout_error_standardised_mean).")
+
+
+def _given_entropy_check(observed: dict[str, Any], limit: float, *,
+                         given: bool) -> dict[str, Any]:
+    """The ``given_entropy`` check: where S is given, the share of the observed pairs that
+    decrease it beyond noise (``observed``: :func:`~metriplex._reference._observed_laws`).
+    A new-user check's heated oscillator whose bath leaks heat was "consistent" (residual
+    ratio 1.9, under its limit by the tolerance) while its given S fell on 62 % of the
+    pairs."""
+    falls = _finite(observed["entropy_decreasing_fraction"]) if given else None
+    return _reason("given_entropy", falls, limit, None if falls is None else falls <= limit,
+                   NOT_CONSISTENT,
+                   "fraction of the held-out pairs along which the data decrease the given "
+                   "entropy by more than noise on the states would: GENERIC data never do"
+                   if given else "S is learned: it is whatever entropy fits the data")

@@ -87,6 +87,12 @@ correlation``                             (3% of the rates) unexplained: the lag
                                           as much would hide (cannot tell, where the
                                           residual ratio passes: it weakens only a
                                           "consistent")
+``given_entropy``          0.1            where S is given, the fraction of the held-out
+                                          pairs along which the data decrease it by more
+                                          than noise on the states would (the pairs
+                                          themselves, no fitted field): GENERIC data never
+                                          do, whatever the fit (not consistent, before any
+                                          other check; ``passed`` is ``None`` if S is learned)
 ``residual_ratio``         2              the structured model leaves more than twice the
                                           residual of the reference (four times its power),
                                           where residuals under the tolerance (3% of the
@@ -151,7 +157,7 @@ data scale), so none of them depends on the units of time, state, :math:`E` or :
 A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
-Outcome: a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
+Outcome: a failed ``given_entropy`` → **not consistent**; else a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
 ``training_coverage``, ``training_roughness``, ``training_pairs``,
 ``training_trajectories`` or ``reference_residual``
 → **cannot tell**;
@@ -186,7 +192,7 @@ from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISS
                               NOT_CONSISTENT, NOT_POISSON, REVERSIBLE_ONLY, UNIDENTIFIED_SPLIT,
                               _SPLIT_CHECKS, _far_beyond, _residual_checks, _reversible_only,
                               _said, _soundness_checks, _structure_checks)
-from ._verdict_outcome import _outcome, _violations
+from ._verdict_outcome import _accuracy, _given_entropy_check, _outcome, _violations
 from ._verdict_skill import _skill_check
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
@@ -236,6 +242,7 @@ class Thresholds:
     training_trajectories: int = 3
     training_roughness: float = 2.0
     rollout_skill: float = 1.0
+    given_entropy: float = 0.1
 
 
 def verdict(
@@ -327,13 +334,13 @@ def verdict(
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     entropy_free = bool(weights(model.entropy)) or isinstance(model.entropy, ZeroPotential)
     reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)
+    # what the observed data do under the learned E and S (no fitted field involved)
+    observed = _observed_laws(model, held, d, dtype)
+    reasons.append(_given_entropy_check(observed, th.given_entropy, given=not entropy_free))
 
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
     outcome = _outcome(failed, ratio, converged, _far_beyond(rel_gen, rel_box, th))
-
-    # -- what the observed data do under the learned E and S (no fitted field involved) --
-    observed = _observed_laws(model, held, d, dtype)
     excess = None
     if r_box is not None:
         excess_v = (np.mean(r_gen**2, axis=0) - np.mean(r_box**2, axis=0)) / max(signal, 1e-300)
@@ -385,10 +392,3 @@ def verdict(
         "thresholds": dataclasses.asdict(th),
     }
 
-
-def _accuracy(report: dict[str, Any]) -> str:
-    """What a "consistent" adds of the model's accuracy, which it does not judge (a new-user
-    check read "consistent, all 14 checks pass" of rollouts 14 % off)."""
-    err = _finite(report.get("rollout_error_standardised_mean"))
-    return ("" if err is None else f" That is the structure, not the accuracy: the rollouts "
-            f"err by {err:.3g} in standard deviations (rollout_error_standardised_mean).")
