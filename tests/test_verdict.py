@@ -809,6 +809,7 @@ def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():
     assert v["statement"].endswith(GIVEN_ENTROPY_FALLS + " " + MISSING_VARIABLE)
     given = [r for r in v["reasons"] if r["name"] == "given_entropy"][0]
     assert given["passed"] is False and given["value"] > 0.5, given
+    assert any("the given entropy decreases" in w for w in v["violations"]), v["violations"]
     # The same data, unflipped: the given S never falls, and the check passes.
     v = verdict(system.model, data, report=mx.evaluate(system.model, data, scheme=mx.RK4()),
                 converged=True, reference=train_reference(data, steps=200, width=16))

@@ -46,7 +46,8 @@ def _worst_variables(excess: dict[str, float | None] | None) -> list[str]:
     return [n for v, n in ranked[:3] if v >= 0.1 * ranked[0][0]]
 
 
-def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None) -> list[str]:
+def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None,
+                given: bool = False) -> list[str]:
     """What a "not consistent" adds: the laws the observed data break under the learned E and
     S (``observed``: :func:`~metriplex._reference._observed_laws`) and the variables the
     structure cannot fit (``excess``: each one's excess residual)."""
@@ -57,8 +58,8 @@ def _violations(observed: dict[str, Any], excess: dict[str, float | None] | None
                     f"|dE/dt| = {rate:.2g} of its largest possible rate)")
     falls = observed["entropy_decreasing_fraction"]
     if falls is not None and falls > 0.1:
-        laws.append(f"second law: on {100 * falls:.0f}% of the observed pairs the learned "
-                    "entropy decreases")
+        laws.append(f"second law: on {100 * falls:.0f}% of the observed pairs the "
+                    f"{'given' if given else 'learned'} entropy decreases")
     worst = _worst_variables(excess)
     if worst:
         laws.append(f"the structure cannot fit the variable{'s' if len(worst) > 1 else ''} "

@@ -345,7 +345,8 @@ def verdict(
     if r_box is not None:
         excess_v = (np.mean(r_gen**2, axis=0) - np.mean(r_box**2, axis=0)) / max(signal, 1e-300)
         excess = {name: _finite(v) for name, v in zip(data.names, excess_v)}
-    laws = _violations(observed, excess) if outcome == NOT_CONSISTENT else []
+    laws = _violations(observed, excess, given=not entropy_free) \
+        if outcome == NOT_CONSISTENT else []
 
     if outcome == CONSISTENT:
         key = [r for r in reasons if r["name"] == "residual_ratio"][0]
