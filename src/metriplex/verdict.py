@@ -157,9 +157,9 @@ data scale), so none of them depends on the units of time, state, :math:`E` or :
 A figure that cannot be computed (a degeneracy whose factors are all zero, e.g.
 :math:`S = 0`) is ``None`` with the check passed and the reason in its ``note``; never 0.0.
 
-Outcome: a failed ``given_entropy`` → **not consistent**; else a failed ``held_out_pairs``, ``training_converged``, ``training_range``,
-``training_coverage``, ``training_roughness``, ``training_pairs``,
-``training_trajectories`` or ``reference_residual``
+Outcome: a failed ``given_entropy`` → **not consistent**; else a failed ``held_out_pairs``,
+``training_converged``, ``training_range``, ``training_coverage``, ``training_roughness``,
+``training_pairs``, ``training_trajectories`` or ``reference_residual``
 → **cannot tell**;
 else a failed ``residual_ratio`` → **not consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
 except after a converged training whose residual is far beyond the reference's:
