@@ -366,6 +366,11 @@ def test_a_reference_that_fits_worse_than_the_structured_model_is_named_first():
 
     (_, weaker, _), _ = _residual_checks(0.037, 0.047, "", Thresholds(), correlation=0.99)
     assert weaker["passed"] is False and "the reference is the weaker fit" in weaker["note"]
+    assert weaker["note"].index("weaker fit") < weaker["note"].index("both miss an input")
+    # Where both miss much (a new-user check's driven oscillator: 0.23 against 0.48), the
+    # input comes first: a longer reference training made its residual worse, 0.48 -> 1.2.
+    (_, driven, _), _ = _residual_checks(0.23, 0.48, "", Thresholds(), correlation=0.999)
+    assert driven["note"].index("both miss an input") < driven["note"].index("weaker fit")
     (_, both, _), _ = _residual_checks(0.06, 0.047, "", Thresholds(), correlation=0.99)
     assert "weaker fit" not in both["note"] and "may miss it too" in both["note"]
 
