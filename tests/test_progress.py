@@ -31,13 +31,21 @@ def test_labels_prefix_the_bars_opened_inside_them():
 
 
 @pytest.mark.parametrize("repeats", [1, 4])
-def test_each_training_of_several_is_labelled(monkeypatch, repeats):
-    training = object.__new__(_repeats.Training)
-    object.__setattr__(training, "repeats", repeats)
-    monkeypatch.setattr(_repeats.Training, "train_one",
-                        lambda self, r, resumed: (_progress._LABELS.get(), None))
-    labels, _ = training(1, False)
-    assert labels == (() if repeats == 1 else ("training 2 of at most 4",))
+def test_each_training_of_several_is_labelled(tmp_path, repeats):
+    from metriplex._train import History
+
+    labels = []
+
+    def one(r, resumed):  # poor every time, so every training runs
+        labels.append(_progress._LABELS.get())
+        return f"model {r}", History(step=[0, 100], best_step=100, best_rollout=0.9,
+                                     best_rollout_failures=0, converged=True)
+
+    _repeats.train_repeats(one, repeats=repeats, out=tmp_path, resume=False, budget=None,
+                           began=0.0, keep=lambda m, h: None)
+    assert labels == ([()] if repeats == 1 else
+                      [(f"training {r} of at most 4",) for r in range(1, 5)])
+    assert _progress._LABELS.get() == ()
 
 
 def test_a_fit_under_a_stopping_rule_says_its_estimate_is_the_caps(capsys, monkeypatch):

@@ -190,14 +190,6 @@ class Training:
         return ALTERNATIVE_ENERGY
 
     def __call__(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
-        if self.repeats <= 1:
-            return self.train_one(r, resumed)
-        with progress_label(f"training {r + 1} of at most {self.repeats}"):
-            return self.train_one(r, resumed)
-
-    def train_one(self, r: int, resumed: bool) -> tuple[GenericModel, History]:
-        """Training ``r`` (resumed from its checkpoints where ``resumed``): its stages before
-        the main one, then the main one."""
         config, train, valid = self.config_of(r), self.train, self.valid
         loss = self.loss if config is self.config else build_loss(config, self.units, train)
         m_key, f_key = self.keys if r == 0 else tuple(jr.fold_in(k, r) for k in self.keys)
@@ -305,7 +297,10 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
             print(_again_line(r, repeats, best, change(r), good), file=sys.stderr)
         start = time.perf_counter()
         try:
-            model, history = one(r, resume and left_checkpoint(out, r))
+            # Each bar of the training says which one it is (a run of four took 21 minutes).
+            with progress_label(f"training {r + 1} of at most {repeats}") if repeats > 1 \
+                    else contextlib.nullcontext():
+                model, history = one(r, resume and left_checkpoint(out, r))
         except TrainingDiverged as e:
             diverged = e
             outcomes.append(Outcome(math.inf, 0, 0, str(e), time.perf_counter() - start,
