@@ -286,6 +286,8 @@ def test_trainings_that_did_alike_say_that_the_start_is_not_the_limit():
     note = _trainings_note.trainings_note(outcomes(0.255, 0.304, 0.258, change="--quadratic"))
     assert "3 trainings from other initialisations did alike (scores within 1.2x" in note
     assert "too few trajectories" in note and "more of the structure" in note
+    # ... or data that no GENERIC model fits (a new-user check's hidden bath, drive, noise).
+    assert "not GENERIC in these variables" in note and "metriplex evaluate" in note
     solved = outcomes(0.045, 0.056, 0.042, change="--quadratic")
     solved["trainings"][-1]["score"] = 0.0067  # another form served: nothing to blame
     for unlike in (solved,

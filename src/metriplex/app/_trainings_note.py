@@ -50,8 +50,9 @@ ALIKE = 1.5
 def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
     """Where two or more trainings from other initialisations (no changed settings) were all
     judged, none failing, with scores within :data:`ALIKE` of each other, and no training of
-    the run was good (at ``good``): that the limit is the data or the model's form, not the
-    start."""
+    the run was good (at ``good``): that the limit is the data, the model's form, or data not
+    GENERIC in their variables (a new-user check's hidden heat bath, drive and noise: each
+    blamed on the first two), not the start."""
     plain = [o for o in trainings if not o.get("change")]
     scores = [o.get("score") for o in plain]
     if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
@@ -64,4 +65,6 @@ def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
     return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
             f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "
             "what limits them: the data (too few trajectories near the states to predict: give "
-            "more) or what the model can express (give more of the structure you know)")
+            "more), what the model can express (give more of the structure you know), or the "
+            "data themselves: not GENERIC in these variables (a variable missing, a drive, "
+            "noise; `metriplex evaluate` says which)")
