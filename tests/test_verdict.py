@@ -280,6 +280,11 @@ def test_data_no_generic_model_fits_are_not_consistent(pumped):
 
     (unjudged,) = _coverage_check(pumped, narrow, ratio_failed=False, th=Thresholds())
     assert unjudged["passed"] is None and unjudged["value"] == cover["value"]
+    assert unjudged["note"] == "not judged: the residual ratio passes"
+    # ... nor where the ratio itself was not judged (a new-user check read "the residual
+    # ratio passes" beside the ratio's own "not judged: the reference fits badly").
+    (unjudged,) = _coverage_check(pumped, narrow, ratio_failed=None, th=Thresholds())
+    assert unjudged["passed"] is None and "nor is the residual ratio" in unjudged["note"]
     elsewhere = mx.Units(tuple(np.mean(pumped.x, axis=0) + 10 * d), tuple(d))
     v_out = verdict(model, pumped, report=report, reference=reference, trained_on=elsewhere)
     assert v_out["outcome"] == CANNOT_TELL, v_out["statement"]

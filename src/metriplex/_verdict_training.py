@@ -21,11 +21,12 @@ if TYPE_CHECKING:
     from .data import Trajectories
 
 
-def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool, th,
+def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool | None, th,
                      reference_pairs: int | None = None) -> list[dict[str, Any]]:
     """The ``training_range``, ``training_coverage``, ``training_roughness`` and
     ``training_pairs`` entries (none without ``trained_on``); ``misfit``: the residual ratio
-    failed; ``reference_pairs``: the pairs the reference trained on."""
+    failed (``None``: it was not judged); ``reference_pairs``: the pairs the reference trained
+    on."""
     if trained_on is None:
         return []
     return _range_check(data, trained_on, th) + _coverage_check(
@@ -35,7 +36,15 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool, t
         trained_on, ratio_failed=misfit, th=th)
 
 
-def _trajectories_check(trained_on, *, ratio_failed: bool, th) -> list[dict[str, Any]]:
+def _unjudged(ratio_failed: bool | None) -> str:
+    """Why a check judged only where the residual ratio failed is not judged: the ratio passed
+    (``False``), or was itself not judged (``None``: the reference fits badly; a new-user check
+    read "the residual ratio passes" beside the ratio's own "not judged")."""
+    return ("not judged: the residual ratio passes" if ratio_failed is False
+            else "not judged: nor is the residual ratio (the reference fits badly)")
+
+
+def _trajectories_check(trained_on, *, ratio_failed: bool | None, th) -> list[dict[str, Any]]:
     """``training_trajectories``, where the number of the model's training trajectories is
     known (``trained_on.trajectories``): a model of one or two trajectories has learned the
     curves of states they visit, which the per-variable range and coverage checks cannot tell
@@ -46,7 +55,7 @@ def _trajectories_check(trained_on, *, ratio_failed: bool, th) -> list[dict[str,
     if k is None:
         return []
     if not ratio_failed:
-        passed, note = None, "not judged: the residual ratio passes"
+        passed, note = None, _unjudged(ratio_failed)
     else:
         passed = k >= th.training_trajectories
         note = (f"the model trained on {k} trajector{'y' if k == 1 else 'ies'}" + (
@@ -58,7 +67,7 @@ def _trajectories_check(trained_on, *, ratio_failed: bool, th) -> list[dict[str,
                     note)]
 
 
-def _pairs_check(trained_on, reference_pairs: int | None, *, ratio_failed: bool,
+def _pairs_check(trained_on, reference_pairs: int | None, *, ratio_failed: bool | None,
                  th) -> list[dict[str, Any]]:
     """``training_pairs``, where the model's training pairs are known (``trained_on.pairs``):
     their number against the ``reference_pairs`` that the reference trained on, from these
@@ -69,7 +78,7 @@ def _pairs_check(trained_on, reference_pairs: int | None, *, ratio_failed: bool,
         return []
     value = trained_on.pairs / reference_pairs
     if not ratio_failed:
-        passed, note = None, "not judged: the residual ratio passes"
+        passed, note = None, _unjudged(ratio_failed)
     else:
         passed = value >= th.training_pairs
         note = (f"the model trained on {trained_on.pairs} pairs of samples, the reference on "
@@ -106,7 +115,7 @@ def beyond_share(data: Trajectories, trained_on: Units) -> tuple[float, str]:
     return share, data.names[int(np.argmax(np.sum(beyond, axis=0)))]
 
 
-def _coverage_check(data, trained_on, *, ratio_failed: bool, th) -> list[dict[str, Any]]:
+def _coverage_check(data, trained_on, *, ratio_failed: bool | None, th) -> list[dict[str, Any]]:
     """``training_coverage``: the share of ``data``'s states beyond ``BEYOND`` standard
     deviations of the training data's mean (``trained_on``) in some variable. A model trained
     on few trajectories (one long one, say) misses states that others reach well within
@@ -114,7 +123,7 @@ def _coverage_check(data, trained_on, *, ratio_failed: bool, th) -> list[dict[st
     on these data. Judged only where the residual ratio failed (``ratio_failed``)."""
     share, most = beyond_share(data, trained_on)
     if not ratio_failed:
-        passed, note = None, "not judged: the residual ratio passes"
+        passed, note = None, _unjudged(ratio_failed)
     else:
         passed = share <= th.training_coverage
         note = (f"{share:.1%} of these states lie beyond {BEYOND:g} standard deviations of "
@@ -144,7 +153,7 @@ def _range_check(data, trained_on, th) -> list[dict[str, Any]]:
     return [_reason("training_range", far, th.training_range, passed, CANNOT_TELL, note)]
 
 
-def _roughness_check(data, trained_on, rel_gen: float | None, *, ratio_failed: bool,
+def _roughness_check(data, trained_on, rel_gen: float | None, *, ratio_failed: bool | None,
                      th) -> list[dict[str, Any]]:
     """``training_roughness``, where the roughness of the model's training data is known
     (``trained_on.roughness``): were they rougher than ``data`` (noisier, or sampled more
@@ -158,8 +167,8 @@ def _roughness_check(data, trained_on, rel_gen: float | None, *, ratio_failed: b
     value = None if not here else _finite(rough / here)
     if not ratio_failed or value is None or rel_gen is None:
         passed, note = None, (
-            "not judged: " + ("the residual ratio passes" if not ratio_failed
-                              else "these data's roughness is unknown"))
+            _unjudged(ratio_failed) if not ratio_failed
+            else "not judged: these data's roughness is unknown")
     else:
         passed = not (value > th.training_roughness and rel_gen <= rough)
         note = (f"the training data's rates were {_fmt(rough)} rough (noise gives 1), these "

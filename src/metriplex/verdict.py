@@ -328,8 +328,10 @@ def verdict(
                                 held_out=len(pairs.dt) if valid is not None else 0,
                                 fraction=reference.validation) + _skill_check(report, th)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
-    reasons += compared + _training_checks(data, trained_on, rel_gen, th=th, misfit=any(
-        r["name"] == "residual_ratio" and r["passed"] is False for r in compared),
+    ratio_passed = next(r["passed"] for r in compared if r["name"] == "residual_ratio")
+    reasons += compared + _training_checks(
+        data, trained_on, rel_gen, th=th,
+        misfit=None if ratio_passed is None else not ratio_passed,
         reference_pairs=len(train.t) - len(train.ids))
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     entropy_free = bool(weights(model.entropy)) or isinstance(model.entropy, ZeroPotential)
