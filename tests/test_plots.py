@@ -173,6 +173,12 @@ def test_a_tiny_change_of_the_energy_is_drawn_flat_and_the_data_beside_the_rollo
     title = energy.get_title()
     assert "on the rollout: moves by 0.004, 0.02% of its spread over the data" in title
     assert "on the data: moves by 0.004, 0.02% of its spread over the data" in title
+    # ... and by how much it drifts beyond noise and oscillation, what the metric
+    # energy_change_along_data_over_spread reads (a new-user check saw 1.80 % here, 0.36 % there).
+    from metriplex._roughness import range_beyond_noise
+    drift = range_beyond_noise(E + 1e-4, ts) / 20.0
+    assert f"(drift beyond noise: {drift:.2%})" in title and 0 < drift <= 0.004 / 20
+    assert "drift beyond noise" not in entropy.get_title()
     assert "on the rollout: moves by 0.5, 25.00% of its spread" in entropy.get_title()
     plt.close(fig)
 

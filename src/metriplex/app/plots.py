@@ -13,6 +13,7 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from .._roughness import range_beyond_noise  # noqa: E402
 from ._layout import SAVE_DPI as SAVE_DPI, save_figure as save_figure  # noqa: E402
 from ._layout import legend as _legend, time_limits as _time_limits  # noqa: E402
 
@@ -219,12 +220,21 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
         ax.set_ylabel(f"learned {what}")
         moved = "".join(f"\non the {w}: moves by {np.nanmax(c) - np.nanmin(c):.3g}, "
                         f"{(np.nanmax(c) - np.nanmin(c)) / spread:.2%} of its spread over the data"
+                        + (_drift(c, ts, spread) if w == "data" and what.startswith("energy") else "")
                         for w, c in (("rollout", v), ("data", on_data))
                         if spread and c is not None and np.isfinite(c).any())
         ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
                      fontsize=9)
         ax.legend(fontsize=8)
     return fig
+
+
+def _drift(E: np.ndarray, ts: np.ndarray, spread: float) -> str:
+    """The learned energy's drift along the data beyond noise and oscillation, as the metric
+    ``energy_change_along_data_over_spread`` measures it on each trajectory (the range of its
+    means over stretches): a new-user check read 1.80 % in the title beside 0.36 % there."""
+    ok = np.isfinite(E)
+    return f" (drift beyond noise: {range_beyond_noise(E[ok], ts[ok]) / spread:.2%})"
 
 
 def _least_span(ax: Axes, spread: float | None) -> None:
