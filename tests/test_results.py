@@ -258,7 +258,7 @@ def test_the_verdict_cannot_tell_where_friction_carries_the_motion():
 
     sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.0,
           "jacobi_residual_relative": None, "jacobi_residual_to_L": None,
-          "friction_min_eigenvalue": 0.0,
+          "friction_min_eigenvalue": 0.0, "friction_min_eigenvalue_relative": 0.0,
           "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
           "temperature_negative_fraction": 0.0, "temperature_min": 0.5,
           "reversible_share": 2e-9,
@@ -287,7 +287,7 @@ def test_the_verdict_cannot_tell_where_learned_temperatures_are_negative():
 
     sr = {"degeneracy_L_gradS_relative": 0.0, "degeneracy_M_gradE_relative": 0.01,
           "jacobi_residual_relative": None, "jacobi_residual_to_L": None,
-          "friction_min_eigenvalue": 0.0,
+          "friction_min_eigenvalue": 0.0, "friction_min_eigenvalue_relative": 0.0,
           "friction_max_eigenvalue": 1.0, "poisson_antisymmetry_relative": 0.0,
           "temperature_negative_fraction": 0.3, "temperature_min": -2.5e-5,
           "null_reasons": {"jacobi_residual_to_L": "L is zero"}}

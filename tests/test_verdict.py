@@ -714,7 +714,8 @@ def test_the_checks_on_S_and_M_do_not_apply_where_the_friction_never_acts():
 
     sr = {"null_reasons": {}, "degeneracy_L_gradS_relative": 0.71,
           "degeneracy_M_gradE_relative": 0.52, "jacobi_residual_to_L": 0.0,
-          "friction_min_eigenvalue": 0.0, "friction_max_eigenvalue": 1e-7,
+          "friction_min_eigenvalue": 0.0, "friction_min_eigenvalue_relative": 0.0,
+          "friction_max_eigenvalue": 1e-7,
           "poisson_antisymmetry_relative": 0.0, "temperature_negative_fraction": None,
           "reversible_share": 1.0}
     report = {"entropy_production_negative_fraction": 0.48}

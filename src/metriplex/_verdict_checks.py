@@ -332,9 +332,8 @@ def _structure_checks(sr: dict[str, Any], report: dict[str, Any], th, *,
                     + ("" if ent_pass else ": a second-law violation of the fitted model"))
     reasons.append(_reason("entropy_production", frac, th.entropy_production, ent_pass,
                            CANNOT_TELL, ent_note))
-    lo, hi = sr["friction_min_eigenvalue"], sr["friction_max_eigenvalue"]
-    big = max(abs(lo), abs(hi))
-    neg = _finite(max(0.0, -lo) / big if big > 0 else 0.0)
+    rel = sr["friction_min_eigenvalue_relative"]
+    neg = None if rel is None else max(0.0, -rel)
     reasons.append(_reason("friction_psd", neg, th.rounding,
                            neg is not None and neg <= th.rounding, CANNOT_TELL,
                            "most negative eigenvalue of M relative to its largest (M must be "
