@@ -344,6 +344,9 @@ def test_a_learned_entropy_that_the_flow_decreases_is_warned_about():
     # system's learned S is not determined by any data).
     assert r["reversible_share"] == 1.0
     assert "The friction drives none of the motion, so this S plays almost no part" in line
+    # ... and what that means for a system that is damped or conducts heat (a new-user check:
+    # "if it conserves its energy ...; if it dissipates ..." for a piston that does both).
+    assert "if it is damped or heat flows" in line and "the friction was not learned" in line
     busy = structure_warnings({**r, "reversible_share": 0.9})
     (line,) = [w for w in busy if "entropy decreases" in w]
     assert "plays almost no part" not in line

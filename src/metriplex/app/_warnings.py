@@ -115,8 +115,11 @@ def _idle_friction(share: float | None) -> str:
         return ""
     drives = "none" if share >= 1.0 else f"only {1 - share:.1e}"
     return (f" The friction drives {drives} of the motion, so this S plays almost no part in "
-            "the model: if the system conserves its energy, this warning does not concern its "
-            "dynamics; if it dissipates, the friction was not learned.")
+            "the model: if the system's motion is reversible (nothing damps it, no heat "
+            "flows), this warning does not concern its dynamics; if it is damped or heat flows "
+            "(an isolated system keeps its energy either way), L grad E carries that part too, "
+            "as it can where nothing is given, and the friction was not learned: give the "
+            "structure you know (--entropy sum:..., --poisson ...) to tell them apart.")
 
 
 #: Above this excess of the entropy's rise along the rollouts over its rise along the data, in
