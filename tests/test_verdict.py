@@ -756,6 +756,13 @@ def test_a_consistent_fit_by_l_grad_e_alone_says_it_identifies_no_dissipation():
         assert v["outcome"] == CONSISTENT, v["statement"]
         for statement in (REVERSIBLE_ONLY, CONSERVATIVE):
             assert (statement in v["statement"]) is (statement == said)
+        # A "cannot tell" says it too (a new-user check's piston: "cannot tell: not converged",
+        # with no word that the fit identified no dissipation).
+        v = verdict(model, data, report=report, reference=reference, converged=False,
+                    stopped="time budget reached")
+        assert v["outcome"] == CANNOT_TELL, v["statement"]
+        for statement in (REVERSIBLE_ONLY, CONSERVATIVE):
+            assert (statement in v["statement"]) is (statement == said)
 
 
 def test_noise_on_the_states_is_named_where_the_reference_fails():

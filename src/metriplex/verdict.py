@@ -350,6 +350,10 @@ def verdict(
     laws = _violations(observed, excess, given=not entropy_free) \
         if outcome == NOT_CONSISTENT else []
 
+    # A fit by L grad E alone says so wherever it is not refuted (a new-user check's piston,
+    # "cannot tell: not converged", with no word that it identified no dissipation).
+    reversible = "" if not _reversible_only(sr, entropy_free) else " " + (
+        CONSERVATIVE if isinstance(model.friction, ZeroFriction) else REVERSIBLE_ONLY)
     if outcome == CONSISTENT:
         key = [r for r in reasons if r["name"] == "residual_ratio"][0]
         statement = (f"consistent with GENERIC: {_said(key)}; the fitted model is GENERIC and "
@@ -358,10 +362,7 @@ def verdict(
                          "" if converged is not None else " How training ended was not given "
                          "(history=): a model still improving would be 'cannot tell'.") + (
                          " " + sr["identified"]["statement"][0].upper()
-                         + sr["identified"]["statement"][1:]) + (
-                         "" if not _reversible_only(sr, entropy_free) else " " + (
-                             CONSERVATIVE if isinstance(model.friction, ZeroFriction)
-                             else REVERSIBLE_ONLY)))
+                         + sr["identified"]["statement"][1:]) + reversible)
     elif outcome == NOT_CONSISTENT:
         statement = ("NOT consistent with GENERIC (as fitted): "
                      + "; ".join(_said(r) for r in failed) + ("; " + "; ".join(laws) if laws
@@ -376,6 +377,7 @@ def verdict(
             statement += " " + NOT_POISSON
         if bool(weights(model.entropy)) and names & _SPLIT_CHECKS:
             statement += " " + UNIDENTIFIED_SPLIT
+        statement += reversible
     return {
         "outcome": outcome,
         "consistent": outcome == CONSISTENT,
