@@ -145,7 +145,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run", metavar="RUN_DIR", help="run folder written by `metriplex train`")
     p.add_argument("data", metavar="DATA", help="test trajectories (format below)")
     p.add_argument("--out", metavar="METRICS.json",
-                   help="write the metrics as strict JSON here (default: print a summary only)")
+                   help="write every metric as strict JSON here; the scalar ones are printed "
+                   "to stdout as JSON either way")
     p.add_argument("--figures", metavar="DIR", help="also write the report figures here")
     p.add_argument("--scheme", help=scheme_help("", "default: the scheme the run was trained "
                                                  "with"))
