@@ -220,7 +220,8 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
         ax.set_ylabel(f"learned {what}")
         moved = "".join(f"\non the {w}: moves by {np.nanmax(c) - np.nanmin(c):.3g}, "
                         f"{(np.nanmax(c) - np.nanmin(c)) / spread:.2%} of its spread over the data"
-                        + (_drift(c, ts, spread) if w == "data" and what.startswith("energy") else "")
+                        + (_drift(c, ts, spread) if w == "data" and what.startswith("energy")
+                           else "")
                         for w, c in (("rollout", v), ("data", on_data))
                         if spread and c is not None and np.isfinite(c).any())
         ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
