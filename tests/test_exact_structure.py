@@ -424,3 +424,32 @@ def test_degeneracy_exact_builds_what_it_records_for_every_learned_L():
         auto = RunConfig(poisson="lie-poisson", entropy="sum:2", degeneracy=degeneracy)
         assert not exact_blocks(auto)[0]
         assert "PoissonDegeneracy" in repr(build_loss(auto, None, data))
+
+
+@pytest.mark.parametrize("degeneracy", ["auto", "exact"])
+def test_a_lie_poisson_l_is_not_linear_in_the_given_entropy_variables(tmp_path, degeneracy):
+    # An entropy's zero is arbitrary: a new-user check recorded a bath's entropy at 1000, and
+    # the term c^s s of a Lie-Poisson L made it one constant matrix (the model worse than
+    # predicting no motion). Built beside --entropy sum:..., L is linear in the others only,
+    # so an offset on the entropy variable changes nothing; it survives the model file.
+    from metriplex.app._build import build_model
+    from metriplex.app.config import RunConfig
+
+    data = mx.systems.generate("oscillator-bath", trajectories=2, steps=5, seed=0)
+    config = RunConfig(poisson="lie-poisson", entropy="sum:2", degeneracy=degeneracy)
+    model = build_model(config, data, key=jr.key(0))
+    block = model.poisson if degeneracy == "auto" else model.poisson.base
+    assert block.linear_in == (0, 1)
+    x = jnp.asarray(data.x[3])
+    gS = jax.grad(model.entropy)(x)
+    shifted = x.at[2].add(1000.0)
+    np.testing.assert_array_equal(model.poisson(x, gS), model.poisson(shifted, gS))
+    assert float(jnp.max(jnp.abs(model.poisson(x, gS)))) > 1e-3
+    mx.save(tmp_path / "m.mpx", model, n=3)
+    loaded = mx.load(tmp_path / "m.mpx")
+    np.testing.assert_array_equal(loaded.poisson(shifted, gS), model.poisson(x, gS))
+    # Without a given entropy (the rigid body) it stays linear in every variable.
+    free = build_model(RunConfig(poisson="lie-poisson"), data, key=jr.key(0)).poisson
+    assert free.linear_in is None
+    with pytest.raises(mx.MetriplexError, match="linear in some of its 3 variables"):
+        mx.LiePoisson(3, linear_in=(3,), key=jr.key(0))

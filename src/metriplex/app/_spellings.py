@@ -33,8 +33,9 @@ class Learn(NamedTuple):
     (width, depth, activation), the training states ``x``, the block's own scales
     (``output_scale`` of a potential, ``scaling`` of L or M), whether its degeneracy is
     ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, its
-    PRNG ``key``, and the option's ``argument`` (the text after the colon, e.g. ``10`` of
-    ``local:10``)."""
+    PRNG ``key``, the option's ``argument`` (the text after the colon, e.g. ``10`` of
+    ``local:10``) and the ``entropy_variables`` of a given sum (a Lie–Poisson L is not linear
+    in them)."""
 
     n: int
     net: dict[str, Any]
@@ -47,6 +48,7 @@ class Learn(NamedTuple):
     quadratic: bool = False
     confinement: Confinement | None = None
     argument: str = ""
+    entropy_variables: tuple[int, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,6 +200,15 @@ def _friction(b: Learn) -> CholeskyFriction | ProjectedCholeskyFriction:
     return cls(b.n, **b.net, scaling=b.scaling, features=b.features, data=b.x, key=b.key)
 
 
+def _lie_poisson(b: Learn) -> LiePoisson | ProjectedLiePoisson:
+    """``lie-poisson``: linear in every variable but the given entropy ones, whose zero is
+    arbitrary (:class:`~metriplex.structure.lie_poisson.LiePoisson`)."""
+    rest = tuple(k for k in range(b.n) if k not in b.entropy_variables)
+    return (ProjectedLiePoisson if b.exact else LiePoisson)(
+        b.n, scaling=b.scaling, key=b.key,
+        linear_in=rest if b.entropy_variables and rest else None)
+
+
 LOCAL_HELP = ("local:CELLS[,periodic][,shared] (a sum of terms over neighbouring cells, "
               "one network per bond or, shared, one for all; the state holds the same fields "
               "in every cell, stored field by field)")
@@ -220,8 +231,7 @@ POISSON = {
     "casimir3": Spelling("casimir3 (n = 3, Jacobi exact)",
                          learned=_network_poisson("casimir3", "casimir3-entropy"), check=_three),
     "lie-poisson": Spelling("lie-poisson (learned, linear in the state)",
-                            learned=lambda b: (ProjectedLiePoisson if b.exact else LiePoisson)(
-                                b.n, scaling=b.scaling, key=b.key)),
+                            learned=_lie_poisson),
     "file": Spelling("file:PATH (a constant L from .npy, .npz or .mat)",
                      given=lambda a, n: _from_file(ConstantPoisson, a, "L", n)),
 }
