@@ -39,7 +39,8 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--degeneracy", help="auto (default: L grad S = 0 exact for --poisson neural "
                    "when S is given, M grad E = 0 exact when training starts with L grad E alone, "
                    "penalties otherwise) | soft (penalties only) | exact (L and M by "
-                   "construction; casimir3 takes S as its Casimir; not with lie-poisson)")
+                   "construction; casimir3 takes S as its Casimir; lie-poisson only beside "
+                   "--entropy sum:...)")
     g.add_argument("--degeneracy-at", help="where soft degeneracy penalties are evaluated: states "
                    "(both states of each pair, default) | midpoints (one per pair; with "
                    "--scheme discrete-gradient about halves the step's cost)")

@@ -1,6 +1,6 @@
 """What train's final line says of the trainings a run repeated (``--repeats``): each one's
-held-out score, the one kept, and, where those from other initialisations did alike, that the
-start is not what limits them."""
+held-out score, the one kept, and, where those from different initialisations did alike, that
+the start is not what limits them."""
 
 from __future__ import annotations
 
@@ -48,23 +48,25 @@ ALIKE = 1.5
 
 
 def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
-    """Where two or more trainings from other initialisations (no changed settings) were all
-    judged, none failing, with scores within :data:`ALIKE` of each other, and no training of
-    the run was good (at ``good``): that the limit is the data, the model's form, or data not
-    GENERIC in their variables (a new-user check's hidden heat bath, drive and noise: each
-    blamed on the first two), not the start."""
+    """Where two or more trainings from different initialisations (no changed settings) all
+    converged and were judged, none failing, with scores within :data:`ALIKE` of each other,
+    and no training of the run was good (at ``good``): that the limit is the data, the
+    model's form, or data not GENERIC in their variables (a new-user check's hidden heat bath,
+    drive and noise: each blamed on the first two), not the start."""
     plain = [o for o in trainings if not o.get("change")]
     scores = [o.get("score") for o in plain]
+    # A training cut short by the time budget is no like for like (a new-user check: one
+    # converged training and one cut at step 12 600 "did alike").
     if (len(plain) < 2 or any(s is None or o.get("failures") or o.get("diverged")
-                              for s, o in zip(scores, plain))
+                              or o.get("converged") is False for s, o in zip(scores, plain))
             or max(scores) > ALIKE * min(scores)
             # none good, of another form either (a new-user check's chain: 0.045, 0.056,
             # 0.042, then 0.0067 with --quadratic): the note would blame what was solved
             or any(_good(o, good) for o in trainings)):
         return ""
-    return (f"; the {len(plain)} trainings from other initialisations did alike (scores within "
-            f"{max(scores) / min(scores):.2g}x of each other), so where training starts is not "
-            "what limits them: the data (too few trajectories near the states to predict: give "
-            "more), what the model can express (give more of the structure you know), or the "
-            "data themselves: not GENERIC in these variables (a variable missing, a drive, "
-            "noise; `metriplex evaluate` says which)")
+    return (f"; the {len(plain)} trainings from different initialisations did alike (scores "
+            f"within {max(scores) / min(scores):.2g}x of each other), so where training starts "
+            "is not what limits them: the data (too few trajectories near the states to "
+            "predict: give more), what the model can express (give more of the structure you "
+            "know), or the data themselves: not GENERIC in these variables (a variable "
+            "missing, a drive, noise; `metriplex evaluate` says which)")
