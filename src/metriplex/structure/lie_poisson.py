@@ -37,8 +37,8 @@ class LiePoisson(AbstractPoisson):
     linear in :math:`x`, as a Lie–Poisson bracket must).
 
     ``linear_in``: the variables the sum runs over (default every one). The command line leaves
-    out the entropy variables of ``--entropy sum:...``: an entropy's zero is arbitrary, and a new-
-    user check's bath entropy recorded at 1000 made :math:`L` one constant matrix (its term
+    out the entropy variables of ``--entropy sum:...``: an entropy's zero is arbitrary, and a
+    new-user check's bath entropy recorded at 1000 made :math:`L` one constant matrix (its term
     :math:`c^{\,s}s` outweighed the rest by far) and the model worse than predicting no motion.
 
     ```python
@@ -58,7 +58,8 @@ class LiePoisson(AbstractPoisson):
             raise MetriplexError(f"a Lie-Poisson bivector needs n >= 2 variables; got {n}.")
         if linear_in is not None and not (linear_in and all(0 <= k < n for k in linear_in)):
             raise MetriplexError(f"a Lie-Poisson bivector is linear in some of its {n} "
-                                 f"variables, counted from 0; got linear_in={linear_in}.")
+                                 f"variables, counted from 0; got linear_in={linear_in}. Give "
+                                 f"one or more indices from 0 to {n - 1}, or None for all.")
         self.n = n
         self.scaling = scaling
         self.linear_in = None if linear_in is None else tuple(sorted(set(linear_in)))
