@@ -50,7 +50,7 @@ from ..losses import (
 )
 from ..structure.masked import MaskedFriction, MaskedPoisson, check_constant
 from ..structure.confinement import Confinement
-from ..structure.potential import FeatureMap, SumOf
+from ..structure.potential import FeatureMap
 from ._option import option
 from ._spellings import Learn
 from ..train import Average, Plateau
@@ -114,7 +114,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
     if poisson is None:
         poisson = _spelling(config.poisson, "--poisson").learned(Learn(
             n, net, x, kL, scaling=units.poisson_scaling(), exact=exact_L,
-            entropy_variables=entropy.indices if isinstance(entropy, SumOf) else ()))
+            entropy_variables=entropy_variables(config)))
     if friction is None:
         friction = _spelling(config.friction, "--friction").learned(Learn(
             n, net, x, kM, scaling=units.friction_scaling(), exact=exact_M,
