@@ -64,6 +64,7 @@ from metriplex.integrate import DiscreteGradient  # noqa: E402
 from metriplex.losses import SchemeResidual  # noqa: E402
 from metriplex.config import scheme_from_name  # noqa: E402
 from metriplex.app.runs import train_run, trained_scheme  # noqa: E402
+from metriplex._rounding import needs_float64  # noqa: E402
 from metriplex._standardised import standardised_errors  # noqa: E402
 from metriplex.systems import generate  # noqa: E402
 from metriplex.systems.zoo import ZOO  # noqa: E402
@@ -128,14 +129,17 @@ def black_box(train, test, config: RunConfig, horizon: float | None = None) -> d
     trained on ``train`` by ``fit`` with its defaults and, as ``config``'s GENERIC model, the
     same validation split, the residual of the same scheme (``config.scheme``: the one the
     GENERIC model trained with, ``trained_scheme`` of its run), the same width, depth and
-    precision (activation: softplus; input statistics and rate units from all of ``train``).
+    precision (float64 where ``train_run`` chooses it from the data; activation: softplus;
+    input statistics and rate units from all of ``train``).
 
     A discrete-gradient step needs E, S, L and M, which a bare field has not: with that scheme
     the black box trains and rolls out with Crank–Nicolson (``"scheme"`` of the result).
     ``horizon``: also the plain rel. L2 up to that time (``"to_horizon"``)."""
     d = state_scale(train.x)
     rate = d / time_scale(train, d)
-    dtype = jnp.float64 if config.float64 else jnp.float32
+    float64 = config.float64 if config.float64 is not None else (  # as train_run decides
+        needs_float64(train.pairs(), train.names) is not None)
+    dtype = jnp.float64 if float64 else jnp.float32
     box = BlackBoxModel(train.n, width=config.width, depth=config.depth, data=train.x, rate=rate,
                         key=jr.key(config.seed))
     given = config.scheme or "cn"  # the GENERIC model's: trained_scheme of its run

@@ -65,13 +65,14 @@ def test_run_folder_contents(oscillator_run):
     assert cfg["names"] == ["q", "p", "s"] and cfg["config"]["poisson"] == "canonical:1"
     # What the options left at their default decided, spelled out (the options read null).
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
+    assert cfg["config"]["float64"] is None
     assert cfg["decided"] == {"confine": True, "reversible_first": True, "hold_energy": False,
                               "w_temperature": 1.0,
                               "starts": 1, "residual_metric": "correlated", "jacobi": "none",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,
                               "patience": 20, "repeats": 4, "good_score": 0.02, "every": 1,
-                              "scheme": "cn", "coarse_steps": None}
+                              "scheme": "cn", "coarse_steps": None, "float64": False}
     # How each training ended is recorded however many ran (one here or more).
     assert cfg["trainings"] and 0 <= cfg["kept_training"] < len(cfg["trainings"])
     assert {"score", "stopped", "converged"} <= set(cfg["trainings"][cfg["kept_training"]])

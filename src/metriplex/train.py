@@ -134,7 +134,9 @@ def fit(
     on the units of time or of the state).
 
     ``dtype``: ``jnp.float32`` or ``jnp.float64`` (needs ``jax_enable_x64``); default: the
-    model's.
+    model's. Float32 states round a variable far from zero (one near 1e4 to 1e-3): where that
+    is a fair share of its change over a step, the residual fits the rounding as noise on the
+    rates, and float64 trains better (``metriplex train`` chooses float64 there by itself).
 
     ``checkpoint``: a :class:`Checkpoint` (path, how often, whether to resume from it): the
     file is written atomically every ``checkpoint.every`` evaluations, on Ctrl-C and at the

@@ -104,7 +104,7 @@ class RunConfig:
     schedule: str = "plateau"
     max_minutes: float | None = None
     seed: int = 0
-    float64: bool = False
+    float64: bool | None = None  # None: float64 where float32 would round the data (runs)
     checkpoint_every: int = 10
     data_parallel: bool = False
     lbfgs_steps: int = 0

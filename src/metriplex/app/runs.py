@@ -35,6 +35,7 @@ from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_step
 from ._resume import check_resume, decisions, resume_differences, spent_seconds
 from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, pair_spacing
+from .._rounding import needs_float64
 from ..diagnostics import evaluate, rollout_data
 from ..io import check_output_folder, save, write_json
 
@@ -167,10 +168,21 @@ def split_trajectories(data: Trajectories, config: RunConfig, *,
     return data.select(rest), (data.select(valid) if len(valid) else None)
 
 
+def _precision(config: RunConfig, train: Trajectories, saved: dict) -> tuple[bool, list[str]]:
+    """Whether the run trains in float64, and the note that says why where the data decided
+    it: ``--float64``/``--no-float64`` as given, else an interrupted run's choice (``saved``),
+    else float64 where float32 would round a variable by a fair share of its step."""
+    if config.float64 is not None:
+        return config.float64, []
+    if saved:  # a run saved before the choice trained in float32
+        return bool((saved.get("decided") or {}).get("float64", False)), []
+    why = needs_float64(train.pairs(), train.names)
+    return why is not None, [] if why is None else [
+        f"note: training in float64: {why}. --no-float64 trains in float32 anyway (faster); "
+        "subtracting the offset from that variable in the data lets it train in float32."]
+
+
 def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
-    if config.float64:
-        jax.config.update("jax_enable_x64", True)
-    dtype = jnp.float64 if config.float64 else jnp.float32
     _prepare_dir(out, overwrite=overwrite, resume=resume)
     saved = run_config(out) if resume else {}  # the interrupted run's config.json
     if resume:
@@ -180,8 +192,11 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 f"cannot resume: {str(out / 'config.json')!r} is missing, so the interrupted "
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
-        was = dataclasses.replace(RunConfig.from_json(stored), scheme=trained_scheme(saved))
-        config = dataclasses.replace(config, scheme=config.scheme or was.scheme)
+        was = RunConfig.from_json(stored)
+        was = dataclasses.replace(was, scheme=trained_scheme(saved),
+                                  float64=_precision(was, parts.train, saved)[0])
+        config = dataclasses.replace(config, scheme=config.scheme or was.scheme,
+                                     float64=_precision(config, parts.train, saved)[0])
         if said := resume_differences(was, config):
             raise MetriplexError(
                 f"--resume needs the options of the interrupted run, but they differ: {said}. "
@@ -191,6 +206,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     given_train, valid, data_info, validation_by = parts
     if resume:
         check_resume(saved, data_info, given_train, valid)
+    float64, precision_note = _precision(config, given_train, saved)
+    if float64:
+        jax.config.update("jax_enable_x64", True)
+    dtype = jnp.float64 if float64 else jnp.float32
     # A resumed run keeps the spacing it trained with (1 in a run from before the choice).
     spacing = config.every or ((saved.get("decided") or {}).get("every", 1) if resume
                                else pair_spacing(given_train))
@@ -209,7 +228,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     scheme = config.scheme or chosen_scheme(coarse)  # given, else the data's
     for line in ([] if resume else data_notes(given_train, valid, config.entropy, free)
                  + coarse_note(coarse, scheme, config.scheme is None) + spacing_note(
-                     given_train, spacing, config.every)) + said.getvalue().splitlines():
+                     given_train, spacing, config.every) + precision_note
+                 ) + said.getvalue().splitlines():
         print(line, file=sys.stderr)
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     # --max-minutes caps the whole run: a resumed one counts what the interrupted one spent.
@@ -226,6 +246,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                     "entropy_of": None if free is None else list(free),
                     "patience": None if stopping is None else stopping.patience,
                     "repeats": repeats, "good_score": good, "every": spacing, "scheme": scheme,
+                    "float64": float64,
                     # said after training too, where the scheme learns the step's map
                     "coarse_steps": None if scheme in FOURTH_ORDER else coarse},
         "names": list(train.names),
