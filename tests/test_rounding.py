@@ -12,8 +12,7 @@ from metriplex._rounding import FLOAT32_ROUNDING_LIMIT, float32_rounding, needs_
 from metriplex.app.config import RunConfig
 from metriplex.data import state_scale, time_scale
 from metriplex.app.runs import train_run
-from metriplex.cli import main
-from metriplex.io import read_header, write
+from metriplex.io import read_header
 from metriplex.systems import generate
 
 
@@ -60,28 +59,28 @@ def _config(**kw) -> RunConfig:
                      validation=0.0, **kw)
 
 
-def test_no_float64_keeps_float32(tmp_path, capsys):
+def test_no_float64_keeps_float32_and_the_flags_read_so():
+    from metriplex.app._commands import _config_from_args
+    from metriplex.app.cli import build_parser
+
+    def parsed(*flags):
+        return _config_from_args(build_parser().parse_args(["train", "d.npz", "--out", "r",
+                                                            *flags])).float64
+
+    assert (parsed(), parsed("--float64"), parsed("--no-float64")) == (None, True, False)
+
+
+def test_offset_data_train_in_float64_and_a_resume_keeps_the_choice(tmp_path, capsys):
     data = _offset(generate("oscillator-bath", trajectories=3, steps=30, seed=0), 2, 1e4)
+    run = tmp_path / "run"
+    train_run(data, _config(), run, progress=False)
+    assert read_header(run).get("dtype") == "float64"
+    header = json.loads((run / "config.json").read_text())
+    assert header["decided"]["float64"] is True and header["config"]["float64"] is None
+    assert "note: training in float64: float32 would round 's'" in capsys.readouterr().err
+    with pytest.raises(mx.MetriplexError,
+                       match="it ran with --float64, this command gives --no-float64"):
+        train_run(data, _config(float64=False), run, resume=True, progress=False)
     train_run(data, _config(float64=False), tmp_path / "f32", progress=False)
     assert read_header(tmp_path / "f32").get("dtype") == "float32"
     assert "training in float64" not in capsys.readouterr().err
-    header = json.loads((tmp_path / "f32" / "config.json").read_text())
-    assert header["decided"]["float64"] is False
-
-
-def test_the_command_line_decides_and_a_resume_keeps_the_choice(tmp_path, capsys):
-    data = _offset(generate("oscillator-bath", trajectories=3, steps=30, seed=0), 2, 1e4)
-    write(tmp_path / "d.npz", data)
-    flags = ["--poisson", "canonical:1", "--entropy", "sum:2", "--steps", "20",
-             "--eval-every", "10", "--starts", "1", "--repeats", "1", "--no-reversible-first",
-             "--average-steps", "0"]
-    run = str(tmp_path / "run")
-    main(["train", str(tmp_path / "d.npz"), "--out", run, *flags])
-    assert read_header(run).get("dtype") == "float64"
-    header = json.loads((tmp_path / "run" / "config.json").read_text())
-    assert header["decided"]["float64"] is True and header["config"]["float64"] is None
-    assert "note: training in float64: float32 would round 's'" in capsys.readouterr().err
-    code = main(["train", str(tmp_path / "d.npz"), "--out", run, "--resume", "--no-float64",
-                 *flags])
-    assert code != 0
-    assert "it ran with --float64, this command gives --no-float64" in capsys.readouterr().err
