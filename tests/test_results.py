@@ -159,6 +159,15 @@ def test_evaluate_reports_the_error_of_predicting_no_motion():
     assert report["constant_prediction_error_mean"] == pytest.approx(by_hand, rel=1e-12)
     assert report["rollout_error_mean"] == pytest.approx(by_hand, rel=1e-12)
     assert report["constant_prediction_error_mean_completed"] == pytest.approx(by_hand)
+    # In standard deviations too (a new-user check read 7.7e-2 standardised beside 1.6e-3
+    # plain), the model's own standardised error for the motionless model; no offset moves it.
+    still_std = report["constant_prediction_error_standardised_mean"]
+    assert still_std == pytest.approx(report["rollout_error_standardised_mean"], rel=1e-12)
+    far = mx.Trajectories(data.trajectory, data.t, data.x + np.asarray([0.0, 0.0, 1e4]),
+                          data.names)
+    shifted = mx.evaluate(still, far, step_check=False)
+    assert shifted["constant_prediction_error_standardised_mean"] == pytest.approx(still_std)
+    assert shifted["constant_prediction_error_mean"] < 1e-2 * by_hand
     assert 0 < report["constant_prediction_error_to_horizon_mean"] < by_hand
     assert report["trajectories_ending_before_horizon"] == 0
     # A horizon beyond the data's end: the error is the whole length's, and the report says
@@ -179,6 +188,9 @@ def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
     metrics.update(rollout_error_mean=0.02, rollout_error_mean_completed=0.02)
     line = train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better" not in line and "predicting x(t) = x(0) gives 8.000e-01" in line
+    metrics["constant_prediction_error_standardised_mean"] = 0.5
+    line = train_summary(history, metrics, 5.0, Path("run"))
+    assert "predicting x(t) = x(0) gives 8.000e-01 (5.000e-01 in standard deviations)" in line
 
 
 def test_learned_temperatures_are_reported_and_negative_ones_warned_about():

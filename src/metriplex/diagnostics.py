@@ -5,7 +5,8 @@ One set of functions judges ground-truth systems and learned models alike:
 - rollout errors (relative L2 per trajectory, per variable, over time) against observed data,
   rolled out from each trajectory's first state on its own time grid, beside the error of
   predicting no motion at all, :math:`x(t) = x(0)`, which a model must beat to predict anything
-  (``constant_prediction_error_mean``);
+  (``constant_prediction_error_mean``; ``constant_prediction_error_standardised_mean`` in
+  standard deviations, beside ``rollout_error_standardised_mean``);
 - the energy's relative drift along the model's own rollout (to the larger of :math:`|E(x_0)|`
   and E's spread over the data, as its offset is arbitrary), and beyond noise along the data,
   which GENERIC data keep constant (``energy_change_along_data_over_spread``); entropy steps;
@@ -217,6 +218,7 @@ def evaluate(
         per_var_den += np.sum(o**2, axis=0)
     completed = any(np.isfinite(e) for e in per_traj)
     standardised = standardised_errors(pred, xs, lengths, data.x)
+    still = standardised_errors(np.broadcast_to(xs[:, :1], xs.shape), xs, lengths, data.x)
     n_failed = int(np.sum(failed >= 0))
     E, S = energy_entropy_along(model, np.nan_to_num(pred))
     drifts, drifts_gauge, dS_min, neg_frac, along, rounding = [], [], [], [], [], []
@@ -276,6 +278,7 @@ def evaluate(
         # The same error for the prediction x(t) = x(0) (no motion), over all trajectories: a
         # model whose rollouts do not beat it predicts nothing of these data.
         "constant_prediction_error_mean": float(np.mean(const)),
+        "constant_prediction_error_standardised_mean": float(np.mean(still)),
         # Over the completed rollouts only, as rollout_error_mean_completed.
         "constant_prediction_error_mean_completed": known(
             float(np.mean([c for c, e in zip(const, per_traj) if np.isfinite(e)]))

@@ -14,10 +14,10 @@ from typing import TYPE_CHECKING
 from .._errors import MetriplexError
 from ..data import noise_level
 from ..verdict import Thresholds
-from ._summary import evaluated_noise_note, train_summary
+from ._summary import against_constant, evaluated_noise_note, train_summary
 from ._outputs import check_figures, not_an_input
-from ._warnings import (against_constant, cells_hint, in_sample_warning, structure_warnings,
-                        time_unit_warning, trained_on, trained_units, training_range_warning)
+from ._warnings import (cells_hint, in_sample_warning, structure_warnings, time_unit_warning,
+                        trained_on, trained_units, training_range_warning)
 
 if TYPE_CHECKING:
     import argparse

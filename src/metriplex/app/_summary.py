@@ -1,4 +1,5 @@
-"""train's final line: how training ended, and how the held-out rollouts went."""
+"""train's final line: how training ended, and how the held-out rollouts went (beside predicting
+no motion, which evaluate prints too)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,22 @@ import statistics
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from ._warnings import against_constant
+
+def against_constant(metrics: dict) -> tuple[str, bool]:
+    """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
+    trajectories (also in standard deviations), and whether the model fails to beat it
+    (``("", False)`` if none completed)."""
+    done = metrics.get("rollout_error_mean_completed")
+    base = metrics.get("constant_prediction_error_mean_completed")
+    if done is None or base is None:
+        return "", False
+    if done >= base:
+        return (f"NO better than predicting x(t) = x(0) ({base:.3e}): the model does not "
+                f"predict these trajectories"), True
+    still = metrics.get("constant_prediction_error_standardised_mean")  # None: an old report
+    std = "" if still is None else f" ({still:.3e} in standard deviations)"
+    return f"predicting x(t) = x(0) gives {base:.3e}{std}", False
+
 
 if TYPE_CHECKING:
     from ..train import History

@@ -21,19 +21,6 @@ if TYPE_CHECKING:
 _LIMITS = Thresholds()
 
 
-def against_constant(metrics: dict) -> tuple[str, bool]:
-    """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
-    trajectories, and whether the model fails to beat it (``("", False)`` if none completed)."""
-    done = metrics.get("rollout_error_mean_completed")
-    base = metrics.get("constant_prediction_error_mean_completed")
-    if done is None or base is None:
-        return "", False
-    if done >= base:
-        return (f"NO better than predicting x(t) = x(0) ({base:.3e}): the model does not "
-                f"predict these trajectories"), True
-    return f"predicting x(t) = x(0) gives {base:.3e}", False
-
-
 #: Above this fraction of negative learned temperatures, train and evaluate warn (0 for every
 #: true system of the zoo and of the reference experiments with S a sum of entropies). The
 #: entropies' share of the energy gradient (``temperature_share``) is reported, not warned
