@@ -3,6 +3,7 @@ best model so far are poor, and keeping the best."""
 
 import dataclasses
 import json
+import math
 
 import pytest
 
@@ -352,3 +353,17 @@ def test_a_time_budget_that_cuts_the_trainings_short_is_said(tmp_path, capsys):
     assert "the time budget ended training 2 of at most 3 before it converged" in err
     _run([_history(0.01, converged=False, stopped="time budget reached (240 s)")], tmp_path)
     assert "time budget ended" not in capsys.readouterr().err  # good: nothing to add
+
+
+def test_an_outcome_reads_back_as_written_and_judges_alike():
+    # train's final line judges the trainings of config.json with Outcome.good itself.
+    from metriplex.app._repeats import Outcome
+    from metriplex.app._trainings_note import _good
+
+    for outcome in (Outcome(0.01, 0, 900, "converged", 3.0, converged=True),
+                    Outcome(math.inf, 0, 0, "diverged", 1.0, diverged=True),
+                    Outcome(0.01, 2, 900, "converged", 3.0, change="exchange")):
+        assert Outcome.from_json(json.loads(json.dumps(outcome.to_json()))) == outcome
+        assert _good(outcome.to_json(), 0.02) is outcome.good(0.02)
+    assert Outcome(0.01, 0, 900, "converged", 3.0).good(0.02)
+    assert Outcome.from_json({"score": 0.03}).good(0.02) is False  # an older file's few keys

@@ -257,6 +257,15 @@ class Outcome:
                    best_step=history.best_step, stopped=history.stopped, seconds=seconds,
                    converged=history.converged)
 
+    @classmethod
+    def from_json(cls, obj: dict[str, Any]) -> Outcome:
+        """The outcome that :meth:`to_json` wrote (``config.json``'s ``trainings``)."""
+        known = {f.name for f in dataclasses.fields(cls)} - {"score"}
+        score = obj.get("score")
+        return cls(score=math.inf if score is None else float(score),
+                   **{"failures": 0, "best_step": 0, "stopped": "", "seconds": 0.0,
+                      **{k: v for k, v in obj.items() if k in known}})
+
     def good(self, limit: float = GOOD_SCORE) -> bool:
         """Held-out rollouts within ``limit`` (:func:`good_score`), none failing."""
         return self.failures == 0 and self.score <= limit

@@ -4,7 +4,7 @@ the start is not what limits them."""
 
 from __future__ import annotations
 
-from ._repeats import GOOD_SCORE
+from ._repeats import GOOD_SCORE, Outcome
 
 
 def trainings_note(header: dict) -> str:
@@ -34,8 +34,7 @@ def trainings_note(header: dict) -> str:
 
 def _good(outcome: dict, good: float) -> bool:
     """Whether a training's outcome (``config.json``'s) was judged good at ``good``."""
-    return (outcome.get("score") is not None and not outcome.get("failures")
-            and outcome["score"] <= good)
+    return Outcome.from_json(outcome).good(good)
 
 
 #: Trainings from other initialisations whose held-out scores lie within this factor of each
