@@ -64,7 +64,7 @@ def _alike_note(trainings: list[dict], good: float = GOOD_SCORE) -> str:
             or any(_good(o, good) for o in trainings)):
         return ""
     return (f"; the {len(plain)} trainings from different initialisations did alike (scores "
-            f"within {max(scores) / min(scores):.2g}x of each other), so where training starts "
+            f"within {max(scores) / min(scores):.3g}x of each other), so where training starts "
             "is not what limits them: the data (too few trajectories near the states to "
             "predict: give more), what the model can express (give more of the structure you "
             "know), or the data themselves: not GENERIC in these variables (a variable "
