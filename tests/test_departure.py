@@ -85,6 +85,29 @@ def test_states_beyond_three_standard_deviations_but_within_the_training_range_a
     assert line.startswith("note:") and "beyond the training data's range" in line
 
 
+def test_states_far_from_the_mean_but_within_the_training_extent_were_trained_on():
+    # A new-user check's reactor: training states gathered near equilibrium (N_A 0.28, standard
+    # deviation 0.087) with a few trajectories from far out (up to 1.06); a test trajectory
+    # reaching 0.84 was told "never trained on" at 6.4 deviations and the verdict cannot tell.
+    import metriplex as mx
+    from metriplex.app._warnings import training_range_warning
+
+    t = np.arange(50) * 0.1
+    rest = [np.stack([0.28 + 0.01 * np.sin(t + k), np.full(50, 1.0)], 1) for k in range(30)]
+    out = np.stack([0.28 + 0.78 * np.exp(-t), np.full(50, 1.0)], 1)
+    train = mx.Trajectories.from_list([(t, x) for x in rest + [out]], ("N_A", "c"))
+    units = mx.Units.from_data(train)
+    test = mx.Trajectories.from_list([(t, np.stack([0.28 + 0.56 * np.exp(-t),
+                                                      np.full(50, 1.0)], 1))], ("N_A", "c"))
+    assert (0.84 - units.shift[0]) / units.scale[0] > FAR_FROM_DATA  # far from the mean ...
+    assert units.farthest(test.x)[0] == 0.0  # ... inside what training saw
+    assert not [w for w in training_range_warning(units.to_json(), test) if "never" in w]
+    beyond = mx.Trajectories.from_list([(t, np.stack([0.28 + 1.5 * np.exp(-t),
+                                                        np.full(50, 1.0)], 1))], ("N_A", "c"))
+    (line,) = training_range_warning(units.to_json(), beyond)
+    assert "never trained on (N_A at" in line
+
+
 def test_steps_far_larger_than_the_training_steps_are_warned_about():
     # A new-user check gave rollout its initial states with one more sample at t = 10, 200
     # training steps away: each was predicted in one step (errors up to 7.6, an entropy

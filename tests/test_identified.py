@@ -57,6 +57,8 @@ def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
     (line,) = [w for w in structure_warnings(sr) if w.startswith("note:")]
     assert line.startswith("note: what the data determine: E only up to a function of itself")
     assert "only the ratios of the temperatures" in line
+    # a reactor's M conserves the amount of matter too: a new-user check's E was mostly that
+    assert "any F(E, C)" in line
     reference = train_reference(data, steps=300, width=8)  # the truth fits alone (< 3 %)
     same = [verdict(m, data, report=r, converged=True, reference=reference)
             for m, r in ((truth, mx.evaluate(truth, data, scheme=mx.RK4())), (flipped, report))]

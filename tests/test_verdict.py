@@ -663,6 +663,11 @@ def test_a_learned_entropy_is_told_apart_from_a_given_one():
 
     assert "--entropy sum:I,J" in UNIDENTIFIED_SPLIT
     assert "--entropy zero --friction zero" in UNIDENTIFIED_SPLIT
+    # ... and the third, for data with no reversible motion (a new-user check's reactor,
+    # fitted by L grad E alone without flags, was never told of --poisson zero).
+    from metriplex._verdict_checks import REVERSIBLE_ONLY
+
+    assert "--poisson zero" in UNIDENTIFIED_SPLIT and "--poisson zero" in REVERSIBLE_ONLY
 
 
 def test_a_residual_far_beyond_the_reference_is_not_hidden_by_the_tolerance():

@@ -241,7 +241,9 @@ IDENTIFIED = {
                   "motion conserves another quantity C, such as a Casimir of L that M keeps "
                   "too, L/F_E with F(E, C))",
         "function": "E only up to a function of itself, F(E): with L = 0 it enters the flow "
-                    "only through M grad E = 0, so its scale, shape and sign are not determined",
+                    "only through M grad E = 0, so its scale, shape and sign are not "
+                    "determined, and where M conserves another quantity C too (a total "
+                    "amount of matter), E is any F(E, C)",
         "none": "E not at all: L = 0 and M = 0, so the flow does not use it",
     },
     "entropy": {

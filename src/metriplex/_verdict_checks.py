@@ -45,9 +45,9 @@ _SPLIT_CHECKS = {"degeneracy_L_gradS", "jacobi", "entropy_production", "reversib
 UNIDENTIFIED_SPLIT = ("With S learned, trajectories alone do not fix how the motion splits "
                       "into L grad E and M grad S (any flow that conserves the learned E can "
                       "be written as L grad E), so such checks fail on GENERIC data too: give "
-                      "what is known, such as the entropy variables (--entropy sum:I,J), or, "
-                      "for a system that conserves its energy and has none, --entropy zero "
-                      "--friction zero.")
+                      "what is known, such as the entropy variables (--entropy sum:I,J), "
+                      "--poisson zero for one with no reversible motion, or, for one that "
+                      "conserves its energy and has no entropy, --entropy zero --friction zero.")
 
 
 #: What a "cannot tell" adds where the learned L failed the Jacobi check (three of seven
@@ -367,7 +367,8 @@ REVERSIBLE_ONLY = ("The fit is reversible: L grad E drives all of the motion and
                    "friction none, which any flow that conserves the learned E admits (a damped "
                    "system with its heat bath recorded, too), so it identifies neither "
                    "dissipation nor an entropy. Where the data dissipate, give what is known "
-                   "(the entropy variables, --entropy sum:I,J) to learn the split.")
+                   "(the entropy variables, --entropy sum:I,J; --poisson zero where nothing "
+                   "moves reversibly) to learn the split.")
 
 
 def _reversible_only(sr: dict[str, Any], entropy_free: bool) -> bool:

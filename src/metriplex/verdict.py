@@ -57,9 +57,9 @@ name                       limit          meaning
                                           its predictions belong to its scheme at the data's
                                           step, not to a vector field (cannot tell; only
                                           where the report measured it)
-``training_range``         6              the data reach more than 6 standard deviations
-                                          from the mean of the model's training data (only
-                                          with ``trained_on``): there the model
+``training_range``         6              the data reach beyond the model's training data,
+                                          more than 6 standard deviations from their mean
+                                          (only with ``trained_on``): there the model
                                           extrapolates (cannot tell)
 ``training_coverage``      0.05           failed residual ratio, ``trained_on``: over 5% of
                                           the states beyond 3 of those (cannot tell)

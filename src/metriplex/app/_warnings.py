@@ -256,10 +256,10 @@ def trained_units(units: dict) -> Units | None:
 
 
 def training_range_warning(units: dict, data: Trajectories) -> list[str]:
-    """A warning naming the trajectories of ``data`` that reach more than the verdict's
-    ``training_range`` training standard deviations from the training data's mean (``units``:
-    config.json's): there the model extrapolates, and their errors say how, not how well it
-    learned the system."""
+    """A warning naming the trajectories of ``data`` that reach beyond the training data's
+    extent, more than the verdict's ``training_range`` training standard deviations from
+    their mean (:meth:`~metriplex.Units.farthest`; ``units``: config.json's): there the model
+    extrapolates, and their errors say how, not how well it learned the system."""
     trained = trained_units(units)
     if trained is None:
         return []
