@@ -8,6 +8,15 @@ import statistics
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+if TYPE_CHECKING:
+    from ..train import History
+
+
+#: The noise on the evaluated states (``noise_over_spread``, the median over the variables of
+#: :func:`metriplex.data.state_noise` over their standard deviation) from which train's final
+#: line says that its rollout error includes it.
+NOTED_NOISE = 0.005
+
 
 def against_constant(metrics: dict) -> tuple[str, bool]:
     """The completed rollouts' error beside that of predicting ``x(t) = x(0)`` on the same
@@ -23,16 +32,6 @@ def against_constant(metrics: dict) -> tuple[str, bool]:
     still = metrics.get("constant_prediction_error_standardised_mean")  # None: an old report
     std = "" if still is None else f" ({still:.3e} in standard deviations)"
     return f"predicting x(t) = x(0) gives {base:.3e}{std}", False
-
-
-if TYPE_CHECKING:
-    from ..train import History
-
-
-#: The noise on the evaluated states (``noise_over_spread``, the median over the variables of
-#: :func:`metriplex.data.state_noise` over their standard deviation) from which train's final
-#: line says that its rollout error includes it.
-NOTED_NOISE = 0.005
 
 
 def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,

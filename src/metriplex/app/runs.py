@@ -171,7 +171,7 @@ def split_trajectories(data: Trajectories, config: RunConfig, *,
 def _precision(config: RunConfig, train: Trajectories, saved: dict) -> tuple[bool, list[str]]:
     """Whether the run trains in float64, and the note that says why where the data decided
     it: ``--float64``/``--no-float64`` as given, else an interrupted run's choice (``saved``),
-    else float64 where float32 would round a variable by a fair share of its step."""
+    else float64 where float32 would round the states into the rates (:func:`needs_float64`)."""
     if config.float64 is not None:
         return config.float64, []
     if saved:  # a run saved before the choice trained in float32
