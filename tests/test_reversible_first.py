@@ -32,9 +32,9 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
     data = generate("oscillator-bath", trajectories=6, steps=40, seed=0)
     config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=300, eval_every=50,
                        average_steps=0, validation=0.34, reversible_first=False,
-                       w_temperature=0.0)
+                       w_temperature=0.0, repeats=1, starts=1)
     # Only the main training's first evaluation (its start) is compared: the cold run needs
-    # no more steps than one evaluation.
+    # no more steps than one evaluation, and neither run another training or start.
     _, cold, _, _, _ = train_run(data, dataclasses.replace(config, steps=50), tmp_path / "cold",
                                  progress=False)
     assert "reversible first" not in capsys.readouterr().err
