@@ -103,6 +103,9 @@ def test_train_summary_says_when_the_budget_ended_training_before_convergence():
                           Path("run"), first_stage=True, trainings="kept training 2 of 3")
     assert again.startswith("trained 3000 steps after the first stage's (L grad E alone, "
                             "above), every training with its stages in 5.0 s")
+    # ... and how training ended is the kept one's: the line before may tell of another cut
+    # by the time budget (a new-user check read "converged" against it).
+    assert "5.0 s (the kept training: converged at step 3000" in again
 
 
 def test_train_summary_says_when_the_model_kept_is_barely_trained():

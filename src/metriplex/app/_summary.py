@@ -71,8 +71,8 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
                       "the untrained one (kept): either the data do not determine the "
                       "dynamics away from the training trajectories (give more trajectories or "
                       f"more of the structure), or training ended in a poor fit ({reseed})")
-    if trainings:
-        ended += f"; {trainings}"
+    if trainings:  # how the kept one ended: another may have been cut (a new-user check)
+        ended = f"the kept training: {ended}; {trainings}"
     early = kept_early(history, first_stage, reseed)
     if early:
         ended += early
