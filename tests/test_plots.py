@@ -183,6 +183,22 @@ def test_a_tiny_change_of_the_energy_is_drawn_flat_and_the_data_beside_the_rollo
     plt.close(fig)
 
 
+def test_an_energy_constant_to_rounding_is_called_so_not_said_to_move_by_zero():
+    # A new-user check's figure read "moves by 0, 0.00% of its spread" for an E of spread 1e-9
+    # at 0.084 in float32, beside a warning that it moved by 0.89 of that spread.
+    ts = np.linspace(0.0, 2.0, 21)
+    E = np.full(21, -0.0843)
+    fig = plots.energy_entropy(ts, E, np.linspace(1.0, 1.5, 21), E_data=E,
+                               spreads=(4.5e-8, 2.0), energy_rounding=0.22)
+    energy, entropy = fig.axes
+    assert "constant over the data to rounding (0.22 of its spread" in energy.get_title()
+    assert "learned no energy" in energy.get_title() and "moves by" not in energy.get_title()
+    lo, hi = energy.get_ylim()
+    assert lo < -0.0843 < hi and hi - lo > 1e-3  # flat, not rounding steps filling the panel
+    assert "moves by" in entropy.get_title()
+    plt.close(fig)
+
+
 def test_a_rollout_that_fails_at_its_first_step_still_draws_on_the_whole_time_axis():
     ts = np.linspace(0.0, 2.0, 21)
     E = np.full(21, np.nan)

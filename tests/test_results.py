@@ -613,6 +613,42 @@ def test_evaluate_reports_how_far_the_learned_energy_moves_along_the_data():
     assert 0.85 < range_beyond_noise(np.linspace(0.0, 1.0, 100)) < 0.95  # a drift: most of it
 
 
+def test_an_energy_constant_to_rounding_over_the_data_gets_no_energy_figures_but_a_warning():
+    # A new-user check's E with L = 0 and S given collapsed to a spread of ~1e-9 at values near
+    # 0.08 (float32 rounding 7e-9): the report said it changed by 0.89 of its spread along the
+    # data (rounding over a tiny spread) and its figure "moves by 0". Its moves cannot be
+    # measured: the figures are null, with the reason, and train and evaluate say why.
+    import metriplex as mx
+    from metriplex import systems
+    from metriplex._energy_along import ENERGY_ROUNDING_LIMIT, energy_rounding
+    from metriplex.app._warnings import structure_warnings
+
+    system = systems.get_system("oscillator-bath")
+    data = systems.generate(system, trajectories=2, steps=20, seed=0)
+    truth = system.model
+    flat = mx.GenericModel(mx.Known(lambda x: 0.084 + 1e-16 * x[1]), truth.entropy,
+                           truth.poisson, truth.friction)
+    report = mx.evaluate(flat, data, scheme=mx.RK4(), step_check=False)
+    assert report["energy_rounding_over_data_spread"] > ENERGY_ROUNDING_LIMIT
+    for key in ("energy_relative_drift", "energy_drift_over_data_spread",
+                "energy_change_along_data_over_spread"):
+        assert report[key] is None
+        assert "constant over the data to float64 rounding" in report["null_reasons"][key]
+    said = [w for w in structure_warnings(report) if "to rounding" in w]
+    assert len(said) == 1 and "the learned energy is constant over the data" in said[0]
+    assert "Known limits" in said[0]
+    # The true E varies over the data: its figures are numbers, its rounding ~1e-16.
+    kept = mx.evaluate(truth, data, scheme=mx.RK4(), step_check=False)
+    assert kept["energy_rounding_over_data_spread"] < 1e-12
+    assert kept["energy_change_along_data_over_spread"] < 1e-6
+    # In float32 the same spread is rounding, where float64 resolves it.
+    E = 0.084 + 1e-9 * np.sin(np.arange(50.0))
+    assert energy_rounding(E.astype(np.float32), np.float32) > ENERGY_ROUNDING_LIMIT
+    assert energy_rounding(E, np.float64) < ENERGY_ROUNDING_LIMIT
+    assert energy_rounding(np.zeros(5), np.float32) == 0.0  # E = 0: nothing rounds
+    assert energy_rounding(np.full(5, 2.0), np.float32) == np.inf
+
+
 def test_many_variables_that_train_poorly_get_the_blocks_for_cells_named():
     # A new-user check's chain (n = 18) trained to 0.38 with the default blocks and nothing
     # named the cells' blocks, which gave 0.067.

@@ -9,7 +9,8 @@ One set of functions judges ground-truth systems and learned models alike:
   standard deviations, beside ``rollout_error_standardised_mean``);
 - the energy's relative drift along the model's own rollout (to the larger of :math:`|E(x_0)|`
   and E's spread over the data, as its offset is arbitrary), and beyond noise along the data,
-  which GENERIC data keep constant (``energy_change_along_data_over_spread``); entropy steps;
+  which GENERIC data keep constant (``energy_change_along_data_over_spread``), all null where
+  E is constant to rounding over the data (``energy_rounding_over_data_spread``); entropy steps;
 - degeneracy residuals :math:`|L\nabla S|`, :math:`|M\nabla E|` relative to the size of their
   factors, the Jacobi residual relative to the size of its terms, the PSD margin of ``M``,
   in standardised coordinates (each variable in its standard deviation over the data), as the
@@ -44,6 +45,7 @@ import numpy as np
 from ._errors import MetriplexError
 from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
+from ._energy_along import energy_figures
 from ._entropy_rise import ENTROPY_ROUNDING_UNITS as ENTROPY_ROUNDING_UNITS
 from ._entropy_rise import entropy_rise, entropy_step_rounding as entropy_step_rounding
 from ._entropy_production import (  # noqa: F401 (re-exported)
@@ -52,7 +54,7 @@ from ._entropy_production import (  # noqa: F401 (re-exported)
 from ._standardised import standardised_errors
 # The residuals at given states (no rollout; every rollout is here), public from here.
 from ._structure_check import identified, structure_residuals
-from .data import Trajectories, check_width, range_beyond_noise, state_scale
+from .data import Trajectories, check_width, state_scale
 from ._solve.rollout import RETRY_SUBSTEPS
 from .integrate import AbstractScheme, CrankNicolson, Rollout, model_size, solve
 from ._progress import progress_bar
@@ -221,22 +223,16 @@ def evaluate(
     still = standardised_errors(np.broadcast_to(xs[:, :1], xs.shape), xs, lengths, data.x)
     n_failed = int(np.sum(failed >= 0))
     E, S = energy_entropy_along(model, np.nan_to_num(pred))
-    drifts, drifts_gauge, dS_min, neg_frac, along, rounding = [], [], [], [], [], []
+    dS_min, neg_frac, along, rounding = [], [], [], []
     dtype = float_dtype(model)
     E_data, S_data = energy_entropy_along(model, xs)
-    spread = float(np.ptp(np.concatenate([E_data[k, :T] for k, T in enumerate(lengths)])))
     for k, T in enumerate(lengths):
         if failed[k] >= 0:
             T = min(int(failed[k]), int(T))
         along.append(pred[k, :T])
-        e, s = E[k, :T], S[k, :T]
         if T < 2:
             continue
-        d = float(np.max(np.abs(e - e[0])))
-        # Relative to |E(x0)|, but never to less than E's spread over the data: the learned
-        # energy's offset is arbitrary, and an exact model starting near E = 0 read as 85.
-        drifts.append(d / max(abs(float(e[0])), spread, _TINY))
-        drifts_gauge.append(d / max(spread, _TINY))
+        s = S[k, :T]
         ds = np.diff(s)
         dS_min.append(float(ds.min()))
         rounding.append(entropy_step_rounding(s, dtype))
@@ -284,15 +280,7 @@ def evaluate(
             float(np.mean([c for c, e in zip(const, per_traj) if np.isfinite(e)]))
             if completed else None,
             "constant_prediction_error_mean_completed", f"no rollout completed ({failures})"),
-        "energy_relative_drift": known(float(np.max(drifts)) if drifts else None,
-                                       "energy_relative_drift", no_steps),
-        "energy_drift_over_data_spread": known(
-            float(np.max(drifts_gauge)) if drifts_gauge else None,
-            "energy_drift_over_data_spread", no_steps),
-        # The most the learned E moves along an observed trajectory beyond noise, over its spread.
-        "energy_change_along_data_over_spread": known(float(max(range_beyond_noise(
-            E_data[k, :T], ts[k, :T]) for k, T in enumerate(lengths)) / max(spread, _TINY)),
-            "energy_change_along_data_over_spread", "the learned E is not finite at the data"),
+        **energy_figures(E, E_data, ts, lengths, failed, dtype, null_reasons, no_steps),
         "entropy_min_step": known(float(np.min(dS_min)) if dS_min else None,
                                   "entropy_min_step", no_steps),
         "entropy_negative_step_fraction": known(float(np.mean(neg_frac)) if neg_frac else None,
@@ -309,7 +297,7 @@ def evaluate(
         # At the states of the rollouts up to any failure; null when none ran two steps.
         "entropy_production_negative_fraction": known(
             entropy_production_negative_fraction(model, np.concatenate(along),
-                                                 state_scale(data.x)) if drifts else None,
+                                                 state_scale(data.x)) if dS_min else None,
             "entropy_production_negative_fraction", no_steps),
     }
     if not completed:

@@ -97,3 +97,9 @@ def time_limits(ax: Axes, ts: ArrayLike) -> None:
     ts = ts[np.isfinite(ts)]
     if len(ts) and ts.max() > ts.min():
         ax.set_xlim(ts.min(), ts.max())
+
+
+def line(ax: Axes, ts: ArrayLike, y: ArrayLike, **kw: Any) -> list:
+    """``ax.plot``, with markers when fewer than three points are finite (else they vanish)."""
+    few = np.sum(np.isfinite(np.asarray(y, dtype=np.float64))) < 3
+    return ax.plot(ts, y, marker="o" if few else None, ms=4, **kw)

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import plots
+from .._energy_along import energy_rounding
 from .._errors import MetriplexError
 from .config import scheme_from_name
 from ..data import Trajectories, state_scale, state_statistics, time_scale
@@ -181,7 +182,9 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
     plots.save_figure(_named(plots.energy_entropy(ts, E, S, E_true=truth.energy,
                                                   S_true=truth.entropy, E_data=E_data,
                                                   S_data=S_data, spreads=spreads,
-                                                  failed_at=failed_at), which),
+                                                  failed_at=failed_at,
+                                                  energy_rounding=energy_rounding(
+                                                      E_all[T:], float_dtype(model))), which),
                       folder / "energy_entropy", t=ts, energy=E, entropy=S,
                       energy_along_data=E_data, entropy_along_data=S_data, **fitted)
     bar.update()

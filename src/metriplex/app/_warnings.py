@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
+from .._energy_along import ENERGY_ROUNDING_LIMIT
 from ..verdict import Thresholds
 from ._horizon_note import every_note, predictability_note, step_warning
 
@@ -144,6 +145,14 @@ def energy_change_warning(metrics: dict) -> list[str]:
     """A warning where the learned E moves along the observed trajectories: GENERIC data keep
     the energy constant, and a model's own flow keeps its E constant, so an E that the data
     move is not the energy these data conserve."""
+    rounding = metrics.get("energy_rounding_over_data_spread")
+    if rounding is not None and rounding > ENERGY_ROUNDING_LIMIT:
+        return [f"warning: the learned energy is constant over the data to rounding (its "
+                f"rounding there is {rounding:.2g} of its spread; "
+                "energy_rounding_over_data_spread): the model has learned no energy, and the "
+                "energy figures are null (where L = 0 and S is given nothing fixes E's size, "
+                "and M grad E = 0 is met by a vanishing E: README, Known limits). Judge the "
+                "model by its rollouts and by degeneracy_M_gradE, which is relative."]
     change = metrics.get("energy_change_along_data_over_spread")
     if change is None or change <= ENERGY_CHANGE:
         return []

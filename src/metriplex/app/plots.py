@@ -13,9 +13,11 @@ matplotlib.use("Agg", force=False)
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .._roughness import range_beyond_noise  # noqa: E402
 from ._layout import SAVE_DPI as SAVE_DPI, save_figure as save_figure  # noqa: E402
-from ._layout import legend as _legend, time_limits as _time_limits  # noqa: E402
+from ._layout import legend as _legend  # noqa: E402
+from ._layout import time_limits as _time_limits  # noqa: E402
+from ._energy_plot import LEAST_SPAN as LEAST_SPAN  # noqa: E402
+from ._energy_plot import energy_entropy as energy_entropy  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -75,12 +77,6 @@ def _top_k(values: dict, k: int) -> list:
         v = v[np.isfinite(v)]
         return float(np.max(v)) if len(v) else -np.inf
     return sorted(values, key=lambda n: size(values[n]), reverse=True)[:k]
-
-
-def _line(ax, ts, y, **kw):
-    """``ax.plot``, with markers when fewer than three points are finite (else they vanish)."""
-    few = np.sum(np.isfinite(np.asarray(y, dtype=np.float64))) < 3
-    return ax.plot(ts, y, marker="o" if few else None, ms=4, **kw)
 
 
 def _per_variable_lines(ax, ts, per_variable: dict, max_labels: int, ceiling=None):
@@ -179,71 +175,6 @@ def positions(pred: np.ndarray, obs: np.ndarray, ax: Axes | None = None, *,
     ax.set_title("positions of the two masses"
                  + (f"\n({horizon_label}; fainter: later)" if cut < len(obs) else ""))
     return fig
-
-
-#: The least span of the energy and entropy axes, a fraction of each potential's spread over
-#: the data (autoscaled, a relative change of 5e-5 filled the panel and read as a violation).
-LEAST_SPAN = 1e-2
-
-
-def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
-                   E_true: np.ndarray | None = None, S_true: np.ndarray | None = None,
-                   E_data: np.ndarray | None = None, S_data: np.ndarray | None = None,
-                   spreads: tuple[float, float] | None = None,
-                   failed_at: float | None = None) -> Figure:
-    """Energy and entropy along a rollout (learned potentials; true ones if known) and the
-    learned ones along the observed trajectory (``E_data``, ``S_data``: for GENERIC data E
-    stays constant there and S does not decrease); the titles say how far each moves against
-    ``spreads``, each potential's spread over the data (of which an axis spans at least
-    :data:`LEAST_SPAN`). ``failed_at``: where the rollout failed; the potentials stop there."""
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 3.9), constrained_layout=True)
-    E, S = (np.where(np.isfinite(a), a, np.nan) for a in (E, S))
-    _line(a1, ts, E, color="C3", label="learned E along the learned rollout")
-    _line(a2, ts, S, color="C0", label="learned S along the learned rollout")
-    if E_data is not None:
-        a1.plot(ts, E_data, color="C1", ls=":", lw=1.5, label="learned E along the data")
-    if S_data is not None:
-        a2.plot(ts, S_data, color="C9", ls=":", lw=1.5, label="learned S along the data")
-    if E_true is not None:
-        a1.plot(ts, E_true, color="0.3", ls="--", label="true E along the true trajectory (affine fit)")
-    if S_true is not None:
-        a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
-    suffix = "" if failed_at is None else f"\n(the rollout failed at t = {failed_at:.4g})"
-    panels = ((a1, "energy E", E, E_data), (a2, "entropy S", S, S_data))
-    for (ax, what, v, on_data), spread in zip(panels, spreads or (None, None)):
-        if failed_at is not None:
-            ax.axvline(failed_at, color="0.4", lw=0.8, ls=":", label="rollout failed")
-        _time_limits(ax, ts)
-        _least_span(ax, spread)
-        ax.ticklabel_format(axis="y", useOffset=False)  # an offset label overlapped the title
-        ax.set_xlabel("t")
-        ax.set_ylabel(f"learned {what}")
-        moved = "".join(f"\non the {w}: moves by {np.nanmax(c) - np.nanmin(c):.3g}, "
-                        f"{(np.nanmax(c) - np.nanmin(c)) / spread:.2%} of its spread over the data"
-                        + (_drift(c, ts, spread) if w == "data" and what.startswith("energy")
-                           else "")
-                        for w, c in (("rollout", v), ("data", on_data))
-                        if spread and c is not None and np.isfinite(c).any())
-        ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
-                     fontsize=9)
-        ax.legend(fontsize=8)
-    return fig
-
-
-def _drift(E: np.ndarray, ts: np.ndarray, spread: float) -> str:
-    """The learned energy's drift along the data beyond noise and oscillation, as the metric
-    ``energy_change_along_data_over_spread`` measures it on each trajectory (the range of its
-    means over stretches): a new-user check read 1.80 % in the title beside 0.36 % there."""
-    ok = np.isfinite(E)
-    return f" (drift beyond noise: {range_beyond_noise(E[ok], ts[ok]) / spread:.2%})"
-
-
-def _least_span(ax: Axes, spread: float | None) -> None:
-    """Widen the y-axis about its middle to :data:`LEAST_SPAN` of ``spread``, if narrower."""
-    lo, hi = ax.get_ylim()
-    if spread is not None and np.isfinite(spread) and 0 < spread and hi - lo < LEAST_SPAN * spread:
-        mid, half = 0.5 * (lo + hi), 0.5 * LEAST_SPAN * spread
-        ax.set_ylim(mid - half, mid + half)
 
 
 def error_over_time(ts: np.ndarray, err: np.ndarray, *, reference: np.ndarray | None = None,
