@@ -369,3 +369,36 @@ def test_an_outcome_reads_back_as_written_and_judges_alike():
         assert _good(outcome.to_json(), 0.02) is outcome.good(0.02)
     assert Outcome(0.01, 0, 900, "converged", 3.0).good(0.02)
     assert Outcome.from_json({"score": 0.03}).good(0.02) is False  # an older file's few keys
+
+
+def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_verdict(tmp_path):
+    # A new-user check's gantry crane (exactly GENERIC data): the time budget ended training 3
+    # of at most 4, none judged good, and the verdict read the kept training 2's "converged"
+    # and said NOT consistent at a residual ratio of 2.1.
+    import json
+
+    from metriplex._verdict_checks import _soundness_checks
+    from metriplex.app.runs import training_outcome
+    from metriplex.verdict import Thresholds
+
+    def run(trainings, kept):
+        (tmp_path / "history.json").write_text(json.dumps(
+            {"converged": True, "stopped": "converged at step 24800"}))
+        (tmp_path / "config.json").write_text(json.dumps(
+            {"config": {}, "trainings": trainings, "kept_training": kept}))
+        return training_outcome(tmp_path)
+
+    done = {"failures": 0, "converged": True, "stopped": "converged at step 20000"}
+    cut = {"score": 0.151, "failures": 0, "converged": False, "stopped": "time budget (600 s)"}
+    ended = run([dict(done, score=0.112), dict(done, score=0.0777), cut], 1)
+    assert ended["converged"] is False
+    assert ended["stopped"].startswith("time budget: it ended training 3 before it converged")
+    assert "training 2, held-out score 0.0777) was not judged good (<= 0.02)" in ended["stopped"]
+    reasons = _soundness_checks({"trajectories": 8}, 8, ended["converged"], ended["stopped"],
+                                Thresholds(), held_out=100)
+    (conv,) = [r for r in reasons if r["name"] == "training_converged"]
+    assert conv["passed"] is False and "--resume with a larger --max-minutes" in conv["note"]
+    # Not where one was good, where the last training converged, or where the cut one is kept.
+    assert run([dict(done, score=0.01), cut], 0)["converged"] is True
+    assert run([dict(done, score=0.112), dict(done, score=0.0777)], 1)["converged"] is True
+    assert run([dict(done, score=0.112), dict(cut, score=0.05)], 1)["converged"] is True

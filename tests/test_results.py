@@ -160,6 +160,7 @@ def test_evaluate_reports_the_error_of_predicting_no_motion():
                             mx.ZeroPoisson(3), mx.ZeroFriction(3))
     report = mx.evaluate(still, data, horizon=1.0, step_check=False)
     assert report["constant_prediction_error_mean"] == pytest.approx(by_hand, rel=1e-12)
+    assert np.mean(report["constant_prediction_error"]) == pytest.approx(by_hand, rel=1e-12)
     assert report["rollout_error_mean"] == pytest.approx(by_hand, rel=1e-12)
     assert report["constant_prediction_error_mean_completed"] == pytest.approx(by_hand)
     # In standard deviations too (a new-user check read 7.7e-2 standardised beside 1.6e-3
@@ -188,6 +189,17 @@ def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
     history = _history(3000, 4000, True, "converged at step 4000")
     line = train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better than predicting x(t) = x(0) (8.000e-01)" in line
+    # Where the model beats x(t) = x(0) on most trajectories and a few decide the mean (a
+    # new-user check: 2 of 6 held-out trajectories, while the test set erred 10x less than
+    # the baseline), the line says so rather than "does not predict these trajectories".
+    few = dict(metrics, rollout_error=[0.01, 0.02, 3.5, 0.03],
+               constant_prediction_error=[0.5, 0.6, 1.0, 1.1])
+    line = train_summary(history, few, 5.0, Path("run"))
+    assert "NO better on average than predicting x(t) = x(0) (8.000e-01), though better on " \
+           "3 of 4 trajectories: the other 1 decides the mean" in line
+    assert "does not predict" not in line
+    few["rollout_error"] = [0.9, 0.9, float("inf"), 0.03]  # 1 of the 3 completed
+    assert "the model does not predict" in train_summary(history, few, 5.0, Path("run"))
     metrics.update(rollout_error_mean=0.02, rollout_error_mean_completed=0.02)
     line = train_summary(history, metrics, 5.0, Path("run"))
     assert "NO better" not in line and "predicting x(t) = x(0) gives 8.000e-01" in line

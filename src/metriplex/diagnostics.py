@@ -274,6 +274,7 @@ def evaluate(
         # The same error for the prediction x(t) = x(0) (no motion), over all trajectories: a
         # model whose rollouts do not beat it predicts nothing of these data.
         "constant_prediction_error_mean": float(np.mean(const)),
+        "constant_prediction_error": [float(c) for c in const],  # per trajectory, as above
         "constant_prediction_error_standardised_mean": float(np.mean(still)),
         # Over the completed rollouts only, as rollout_error_mean_completed.
         "constant_prediction_error_mean_completed": known(

@@ -49,8 +49,9 @@ name                       limit          meaning
                                           nothing, and its residuals prove nothing (cannot
                                           tell)
 ``training_converged``     true           training stopped on a plateau, not on a step or
-                                          time cap: a model still improving says little
-                                          (cannot tell; unknown without a history)
+                                          time cap (nor did the cap end the repeats before
+                                          any was judged good): a model still improving
+                                          says little (cannot tell; unknown without a history)
 ``step_sensitivity``       0.1            refining the time step 4x changes more than 10%
                                           of the structured model's predicted motion
                                           (:func:`metriplex.diagnostics.step_sensitivity`):

@@ -32,6 +32,25 @@ def trainings_note(header: dict) -> str:
             + alike)
 
 
+def search_cut_short(header: dict) -> str:
+    """Why the run's trainings are no finished search, from its ``config.json`` (``header``):
+    where none was judged good and the time budget ended the last before it converged while
+    an earlier one is kept, the repeats would have gone on; else ``""``. The verdict then
+    reads training as not converged: a new-user check's gantry crane, exactly GENERIC, was
+    "NOT consistent" at a residual ratio of 2.1 with its kept training 2 of 3 at 0.078."""
+    trainings = header.get("trainings") or []
+    kept = header.get("kept_training", 0)
+    good = (header.get("decided") or {}).get("good_score") or GOOD_SCORE
+    if (len(trainings) < 2 or kept >= len(trainings) - 1
+            or not str(trainings[-1].get("stopped", "")).startswith("time budget")
+            or any(_good(o, good) for o in trainings)):
+        return ""
+    score = Outcome.from_json(trainings[kept]).score
+    return (f"time budget: it ended training {len(trainings)} before it converged, and the "
+            f"one kept (training {kept + 1}, held-out score {score:.3g}) was not judged good "
+            f"(<= {good:.3g}), so the repeats would have gone on")
+
+
 def _good(outcome: dict, good: float) -> bool:
     """Whether a training's outcome (``config.json``'s) was judged good at ``good``."""
     return Outcome.from_json(outcome).good(good)

@@ -30,6 +30,7 @@ from ._build import (Given, build_loss, build_model, casimir_variables, constant
 from ._repeats import (Training, good_score, left_checkpoint, remove_stage_checkpoints,
                        repeats_for, train_repeats)
 from ._report import report_figures
+from ._trainings_note import search_cut_short
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
 from ._resume import check_resume, decisions, resume_differences, spent_seconds
@@ -350,7 +351,9 @@ def run_config(run_dir: str | Path) -> dict:
 def training_outcome(run_dir: str | Path) -> dict:
     """How the run's training ended, from its ``history.json``: ``converged`` (bool) and
     ``stopped`` (the reason), both ``None`` when unknown (a bare model file, no history, or
-    one that cannot be read). The verdict weighs them."""
+    one that cannot be read); not converged where the time budget cut the repeats short
+    before one training was judged good (:func:`search_cut_short`). The verdict weighs
+    them."""
     path = Path(run_dir) / "history.json"
     try:
         obj = json.loads(path.read_text()) if path.is_file() else {}
@@ -360,6 +363,9 @@ def training_outcome(run_dir: str | Path) -> dict:
         obj = {}
     converged = obj.get("converged")
     stopped = obj.get("stopped")
+    cut = search_cut_short(run_config(run_dir)) if converged is True else ""
+    if cut:  # the kept training converged, but the search for a good one was cut short
+        return {"converged": False, "stopped": cut}
     return {"converged": converged if isinstance(converged, bool) else None,
             "stopped": stopped if isinstance(stopped, str) and stopped else None}
 
