@@ -814,6 +814,39 @@ def test_a_step_sensitive_model_that_converged_is_not_told_to_train_longer():
     assert "else train longer or on more trajectories" in notes[False]
 
 
+def test_a_misfit_whose_data_keep_both_laws_is_no_evidence_against_the_structure():
+    # A new-user check's gantry crane, exactly GENERIC, L and S given, four converged
+    # trainings that fit poorly: "NOT consistent" at 6.6x the reference's residual, while
+    # its learned E changed along the observed data at 0.0033 of its largest rate and S
+    # never fell. Here: the oscillator in a bath with the true E and S but half the true
+    # speed of its reversible part; a GENERIC model, whose misfit is the "training's".
+    from metriplex._verdict_outcome import _outcome, weigh_misfit
+
+    system = systems.get_system("oscillator-bath")
+    data = systems.generate(system, trajectories=8, steps=40, seed=3)
+    t = system.model
+    half = np.zeros((3, 3))
+    half[0, 1], half[1, 0] = 0.5, -0.5
+    slow = mx.GenericModel(t.energy, t.entropy, mx.ConstantPoisson(half), t.friction)
+    v = verdict(slow, data, report=mx.evaluate(slow, data, scheme=mx.RK4()), converged=True,
+                reference=train_reference(data, steps=2000, width=16))
+    ratio = [r for r in v["reasons"] if r["name"] == "residual_ratio"][0]
+    assert ratio["passed"] is False and v["residual_generic_relative"] > 0.1, v["statement"]
+    assert v["outcome"] == CANNOT_TELL, v["statement"]
+    assert "break neither law under the learned E and S" in v["statement"]
+    assert v["observed_energy_rate_relative_median"] < 1e-4  # the limit: 0.05
+    # Where the observed flow changes the learned E, the misfit stands (pumped data).
+    failed = [{"name": "residual_ratio", "passed": False, "effect": NOT_CONSISTENT,
+               "note": "6.6x"}]
+    kept = {"energy_rate_relative_median": 0.0033, "entropy_decreasing_fraction": 0.0}
+    broken = dict(kept, energy_rate_relative_median=0.2)
+    assert weigh_misfit(failed, broken) == failed
+    assert _outcome(weigh_misfit(failed, broken), 6.6, True, far=True) == NOT_CONSISTENT
+    assert _outcome(weigh_misfit(failed, kept), 6.6, True, far=True) == CANNOT_TELL
+    assert _outcome(weigh_misfit(failed, dict(kept, entropy_decreasing_fraction=0.3)), 6.6,
+                    True, far=True) == NOT_CONSISTENT
+
+
 def test_a_given_entropy_that_falls_is_blamed_before_a_missing_variable():
     # Data whose entropy's sign was flipped were told to "add the variable that takes" the
     # energy, which they hold already (verdict audit).

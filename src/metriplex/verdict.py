@@ -162,9 +162,10 @@ Outcome: a failed ``given_entropy`` → **not consistent**; else a failed ``held
 ``training_converged``, ``training_range``, ``training_coverage``, ``training_roughness``,
 ``training_pairs``, ``training_trajectories`` or ``reference_residual``
 → **cannot tell**;
-else a failed ``residual_ratio`` → **not consistent**, unless rollouts failed or the step decides the prediction (then **cannot tell**,
-except after a converged training whose residual is far beyond the reference's:
-:func:`~metriplex._verdict_checks._far_beyond`); else any failed check → **cannot tell**;
+else a failed ``residual_ratio`` → **not consistent**, unless the observed data break neither
+law (:func:`~metriplex._verdict_outcome.weigh_misfit`), rollouts failed or the step decides the
+prediction (then **cannot tell**; the last two not after a converged training far beyond the
+reference: :func:`~metriplex._verdict_checks._far_beyond`); else any failed → **cannot tell**;
 else **consistent**. The command line's ``metriplex evaluate --strict`` exits with
 :data:`EXIT_STATUS` of the outcome (0 consistent, 1 not consistent, 3 cannot tell).
 
@@ -193,7 +194,7 @@ from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISS
                               NOT_CONSISTENT, NOT_POISSON, REVERSIBLE_ONLY, UNIDENTIFIED_SPLIT,
                               _SPLIT_CHECKS, _far_beyond, _residual_checks, _reversible_only,
                               _said, _soundness_checks, _structure_checks)
-from ._verdict_outcome import _accuracy, _given_entropy_check, _outcome, _violations
+from ._verdict_outcome import _accuracy, _given_entropy_check, _outcome, _violations, weigh_misfit
 from ._verdict_skill import _skill_check
 from ._verdict_training import _training_checks
 from .data import Trajectories, state_scale, time_scale
@@ -337,10 +338,9 @@ def verdict(
     sr = structure_residuals(model, data.x, scale=state_scale(data.x))
     entropy_free = bool(weights(model.entropy)) or isinstance(model.entropy, ZeroPotential)
     reasons += _structure_checks(sr, report, th, entropy_free=entropy_free)
-    # what the observed data do under the learned E and S (no fitted field involved)
-    observed = _observed_laws(model, held, d, dtype)
+    observed = _observed_laws(model, held, d, dtype)  # the data's laws, no fitted field
+    reasons = weigh_misfit(reasons, observed)
     reasons.append(_given_entropy_check(observed, th.given_entropy, given=not entropy_free))
-
     # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
     outcome = _outcome(failed, ratio, converged, _far_beyond(rel_gen, rel_box, th))
