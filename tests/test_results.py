@@ -400,6 +400,20 @@ def test_a_model_that_makes_more_entropy_than_the_data_show_is_warned_about():
     assert f"by {rise:.3g} times its whole range" in line and "--friction file:" in line
     # 3x the friction: the error still looks fair (under 10 %), the entropy does not.
     assert rise > 1.0 and r["rollout_error_mean"] < 0.1
+    assert true["entropy_rise_over_data_rise"] == pytest.approx(1.0, abs=1e-6)
+    times = r["entropy_rise_over_data_rise"]
+    assert times > 2.0 and f"rises {times:.3g} times as much as along the data" in line
+    # Where S spreads across the trajectories far more than along each (a new-user check's
+    # brake at 290-330 K, heated by 0.5 K along each: 0.066 of the spread, 5.8x the data's
+    # rise), the spread figure says little; the ratio, the same as above, still warns.
+    offset = mx.Trajectories(data.trajectory, data.t,
+                             data.x + np.c_[0.0, 0.0, 3.0][0] * data.trajectory[:, None],
+                             data.names)
+    r = mx.evaluate(more, offset, step_check=False)
+    assert r["entropy_rise_over_data_spread"] < 0.1 * rise
+    assert r["entropy_rise_over_data_rise"] == pytest.approx(times, rel=1e-6)
+    (line,) = [w for w in structure_warnings(r) if "makes entropy" in w]
+    assert "(entropy_rise_over_data_rise)" in line and "whole range" not in line
     # Data whose entropy never changes leave nothing to compare with: null, with the reason
     # (the same shapes as above, so the rollout is not compiled again).
     t = np.arange(61) * 0.1
@@ -409,6 +423,9 @@ def test_a_model_that_makes_more_entropy_than_the_data_show_is_warned_about():
     assert r["entropy_rise_over_data_spread"] is None
     assert r["null_reasons"]["entropy_rise_over_data_spread"] == (
         "the learned entropy is constant over the data's states")
+    assert r["entropy_rise_over_data_rise"] is None
+    assert "the data raise the learned entropy by less than" in \
+        r["null_reasons"]["entropy_rise_over_data_rise"]
     assert not [w for w in structure_warnings(r) if "makes entropy" in w]
 
 

@@ -47,7 +47,8 @@ from ._precision import in_full_precision
 from ._model import GenericModel, float_dtype
 from ._energy_along import energy_figures
 from ._entropy_rise import ENTROPY_ROUNDING_UNITS as ENTROPY_ROUNDING_UNITS
-from ._entropy_rise import entropy_rise, entropy_step_rounding as entropy_step_rounding
+from ._entropy_rise import entropy_rise, entropy_rise_ratio
+from ._entropy_rise import entropy_step_rounding as entropy_step_rounding
 from ._entropy_production import (  # noqa: F401 (re-exported)
     entropy_production_negative_fraction as entropy_production_negative_fraction,
 )
@@ -295,6 +296,9 @@ def evaluate(
         # the completed ones), in units of its spread over the data's states.
         "entropy_rise_over_data_spread": entropy_rise(S, S_data, lengths, failed,
                                                       null_reasons),
+        # How many times the data's rise of it the rollouts make (1 where S tracks the data).
+        "entropy_rise_over_data_rise": entropy_rise_ratio(S, S_data, lengths, failed,
+                                                          null_reasons),
         # At the states of the rollouts up to any failure; null when none ran two steps.
         "entropy_production_negative_fraction": known(
             entropy_production_negative_fraction(model, np.concatenate(along),

@@ -10,8 +10,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from .._energy_along import ENERGY_ROUNDING_LIMIT
 from ..verdict import Thresholds
+from ._law_warnings import ENERGY_CHANGE as ENERGY_CHANGE  # noqa: F401 (re-exported)
+from ._law_warnings import ENTROPY_RISE as ENTROPY_RISE  # noqa: F401 (re-exported)
+from ._law_warnings import energy_change_warning, entropy_rise_warning
 from ._horizon_note import every_note, predictability_note, step_warning
 
 if TYPE_CHECKING:
@@ -108,61 +110,6 @@ def _idle_friction(share: float | None) -> str:
             "(an isolated system keeps its energy either way), L grad E carries that part too, "
             "as it can where nothing is given, and the friction was not learned: give the "
             "structure you know (--entropy sum:..., --poisson ...) to tell them apart.")
-
-
-#: Above this excess of the entropy's rise along the rollouts over its rise along the data, in
-#: units of its range over the data's states (``entropy_rise_over_data_spread``), train and
-#: evaluate warn. Not a check of the verdict: a GENERIC model can make too much entropy. True
-#: models rolled out on their own data give 2e-3 or less (zoo, reference experiments), but 0.68
-#: where Crank–Nicolson's step is coarse for stiff heat conduction (a published-pendulum
-#: stand-in at dt = 0.3): the rollout's entropy, not the field's, is judged.
-ENTROPY_RISE = 1.0
-
-
-def entropy_rise_warning(metrics: dict) -> list[str]:
-    """A warning where the model's entropy outruns the data's along the rollouts: each entropy
-    variable's rate can fit the data while their sum, the entropy production, is far too
-    large, and S only grows, so the error adds up."""
-    rise = metrics.get("entropy_rise_over_data_spread")
-    if rise is None or rise <= ENTROPY_RISE:
-        return []
-    return [f"warning: along the rollouts the learned entropy rises beyond its rise along the "
-            f"data by {rise:.3g} times its whole range over the data's states: the model makes "
-            "entropy that the data do not show (each entropy variable's rate can fit while "
-            "their sum, the entropy production, does not), and its rollouts leave the data's "
-            "range of S. Judge it over short horizons; more trajectories, or M given where it "
-            "is known (--friction file:M.npy), may help."]
-
-
-#: Above this change of the learned E along an observed trajectory, beyond the noise on it
-#: and over E's spread on the data, train and evaluate warn. Measured: 1.9e-3 to 4.1e-2 on the
-#: zoo's fits to clean data (seven cases); 0.26 on a Duffing oscillator trained on neighbouring
-#: pairs of data with 5 % noise, 6.7e-2 on the pairs the default spacing takes, 1.8e-2 clean.
-ENERGY_CHANGE = 0.1
-
-
-def energy_change_warning(metrics: dict) -> list[str]:
-    """A warning where the learned E moves along the observed trajectories: GENERIC data keep
-    the energy constant, and a model's own flow keeps its E constant, so an E that the data
-    move is not the energy these data conserve."""
-    rounding = metrics.get("energy_rounding_over_data_spread")
-    if rounding is not None and rounding > ENERGY_ROUNDING_LIMIT:
-        return [f"warning: the learned energy is constant over the data to rounding (its "
-                f"rounding there is {rounding:.2g} of its spread; "
-                "energy_rounding_over_data_spread): the model has learned no energy, and the "
-                "energy figures are null (where L = 0 and S is given nothing fixes E's size, "
-                "and M grad E = 0 is met by a vanishing E: README, Known limits). Judge the "
-                "model by its rollouts and by degeneracy_M_gradE, which is relative."]
-    change = metrics.get("energy_change_along_data_over_spread")
-    if change is None or change <= ENERGY_CHANGE:
-        return []
-    return [f"warning: the learned energy changes along the observed trajectories by "
-            f"{change:.2g} of its spread over the data, beyond the noise on them "
-            "(energy_change_along_data_over_spread): a closed system keeps its energy "
-            "constant, so this E is not the energy the data conserve. The model is off "
-            "where the data go (too short a training, too few trajectories, noisy training "
-            "data: README, Noisy data), or the system exchanges energy with something its "
-            "state does not record. Do not read it as the system's energy."]
 
 
 #: With this many variables or more and a held-out error above POOR, train names the blocks for
