@@ -393,7 +393,8 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     ended = run([dict(done, score=0.112), dict(done, score=0.0777), cut], 1)
     assert ended["converged"] is False
     assert ended["stopped"].startswith("time budget: it ended training 3 before it converged")
-    assert "training 2, held-out score 0.0777) was not judged good (<= 0.02)" in ended["stopped"]
+    assert "none was judged good (<= 0.02; the one kept: training 2, held-out score 0.0777)" \
+        in ended["stopped"]
     reasons = _soundness_checks({"trajectories": 8}, 8, ended["converged"], ended["stopped"],
                                 Thresholds(), held_out=100)
     (conv,) = [r for r in reasons if r["name"] == "training_converged"]

@@ -112,11 +112,11 @@ def weigh_misfit(reasons: list[dict[str, Any]], observed: dict[str, Any]) -> lis
     falls = _finite(observed.get("entropy_decreasing_fraction"))
     if rate is None or falls is None or rate > ENERGY_RATE or falls > ENTROPY_FALLS:
         return reasons
-    why = (f"; yet the observed data break neither law under the learned E and S (E changes "
+    why = (f"; but the observed data break neither law under the learned E and S (E changes "
            f"along them at {rate:.2g} of its largest rate, S falls on {100 * falls:.0f}% of "
-           "the pairs), as GENERIC data would not: the misfit may be the training's (train "
-           "again: another --seed, more trajectories, the structure you know) as much as the "
-           "structure's")
+           "the pairs), which data with no GENERIC model in these variables would: however "
+           "large, the misfit may be the training's (train again: another --seed, more "
+           "trajectories, the structure you know) rather than the structure's")
     return [dict(r, effect=CANNOT_TELL, note=r["note"] + why)
             if r["name"] == "residual_ratio" and r["passed"] is False else r for r in reasons]
 

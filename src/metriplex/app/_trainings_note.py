@@ -35,7 +35,7 @@ def trainings_note(header: dict) -> str:
 def search_cut_short(header: dict) -> str:
     """Why the run's trainings are no finished search, from its ``config.json`` (``header``):
     where none was judged good and the time budget ended the last before it converged while
-    an earlier one is kept, the repeats would have gone on; else ``""``. The verdict then
+    an earlier one is kept; else ``""``. The verdict then
     reads training as not converged: a new-user check's gantry crane, exactly GENERIC, was
     "NOT consistent" at a residual ratio of 2.1 with its kept training 2 of 3 at 0.078."""
     trainings = header.get("trainings") or []
@@ -46,9 +46,9 @@ def search_cut_short(header: dict) -> str:
             or any(_good(o, good) for o in trainings)):
         return ""
     score = Outcome.from_json(trainings[kept]).score
-    return (f"time budget: it ended training {len(trainings)} before it converged, and the "
-            f"one kept (training {kept + 1}, held-out score {score:.3g}) was not judged good "
-            f"(<= {good:.3g}), so the repeats would have gone on")
+    return (f"time budget: it ended training {len(trainings)} before it converged, and none "
+            f"was judged good (<= {good:.3g}; the one kept: training {kept + 1}, held-out "
+            f"score {score:.3g})")
 
 
 def _good(outcome: dict, good: float) -> bool:
