@@ -192,7 +192,7 @@ def test_an_energy_constant_to_rounding_is_called_so_not_said_to_move_by_zero():
                                spreads=(4.5e-8, 2.0), energy_rounding=0.22)
     energy, entropy = fig.axes
     assert "constant over the data to rounding (0.22 of its spread" in energy.get_title()
-    assert "learned no energy" in energy.get_title() and "moves by" not in energy.get_title()
+    assert "no energy learned" in energy.get_title() and "moves by" not in energy.get_title()
     lo, hi = energy.get_ylim()
     assert lo < -0.0843 < hi and hi - lo > 1e-3  # flat, not rounding steps filling the panel
     assert "moves by" in entropy.get_title()

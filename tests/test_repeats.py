@@ -392,8 +392,9 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     cut = {"score": 0.151, "failures": 0, "converged": False, "stopped": "time budget (600 s)"}
     ended = run([dict(done, score=0.112), dict(done, score=0.0777), cut], 1)
     assert ended["converged"] is False
-    assert ended["stopped"].startswith("time budget: it ended training 3 before it converged")
-    assert "none was judged good (<= 0.02; the one kept: training 2, held-out score 0.0777)" \
+    assert ended["stopped"].startswith("time budget: the search for a good training was cut "
+                                       "short, training 3 before it converged")
+    assert "none judged good at <= 0.02; the one kept, training 2, scored 0.0777" \
         in ended["stopped"]
     reasons = _soundness_checks({"trajectories": 8}, 8, ended["converged"], ended["stopped"],
                                 Thresholds(), held_out=100)
@@ -403,3 +404,5 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     assert run([dict(done, score=0.01), cut], 0)["converged"] is True
     assert run([dict(done, score=0.112), dict(done, score=0.0777)], 1)["converged"] is True
     assert run([dict(done, score=0.112), dict(cut, score=0.05)], 1)["converged"] is True
+    (tmp_path / "config.json").write_text("{damaged")  # as before: the history's word
+    assert training_outcome(tmp_path)["converged"] is True

@@ -196,7 +196,7 @@ def test_train_summary_says_when_the_model_does_not_beat_predicting_no_motion():
                constant_prediction_error=[0.5, 0.6, 1.0, 1.1])
     line = train_summary(history, few, 5.0, Path("run"))
     assert "NO better on average than predicting x(t) = x(0) (8.000e-01), though better on " \
-           "3 of 4 trajectories: the other 1 decides the mean" in line
+           "3 of the 4 completed rollouts: the mean is decided by the other 1" in line
     assert "does not predict" not in line
     few["rollout_error"] = [0.9, 0.9, float("inf"), 0.03]  # 1 of the 3 completed
     assert "the model does not predict" in train_summary(history, few, 5.0, Path("run"))
@@ -674,8 +674,9 @@ def test_an_energy_constant_to_rounding_over_the_data_gets_no_energy_figures_but
     E = 0.084 + 1e-9 * np.sin(np.arange(50.0))
     assert energy_rounding(E.astype(np.float32), np.float32) > ENERGY_ROUNDING_LIMIT
     assert energy_rounding(E, np.float64) < ENERGY_ROUNDING_LIMIT
-    assert energy_rounding(np.zeros(5), np.float32) == 0.0  # E = 0: nothing rounds
+    assert energy_rounding(np.zeros(5), np.float32) == np.inf  # E = 0: no move to measure
     assert energy_rounding(np.full(5, 2.0), np.float32) == np.inf
+    assert np.isnan(energy_rounding(np.full(5, np.nan), np.float32))
 
 
 def test_many_variables_that_train_poorly_get_the_blocks_for_cells_named():

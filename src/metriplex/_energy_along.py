@@ -24,15 +24,13 @@ ENERGY_ROUNDING_LIMIT = 1e-2
 
 def energy_rounding(E_data: np.ndarray, dtype: Any) -> float:
     """The float rounding (``dtype``'s spacing) of the learned energy at its largest value over
-    the data ``E_data``, in units of its spread there; inf where E is the same nonzero number
-    everywhere, 0 where it is 0 everywhere (NaN ignored)."""
+    the data ``E_data``, in units of its spread there; inf where E is the same number
+    everywhere, 0 included (values that are not finite are ignored)."""
     finite = E_data[np.isfinite(E_data)]
     if finite.size == 0:
         return float("nan")
     size, spread = float(np.max(np.abs(finite))), float(np.ptp(finite))
-    if spread > 0:
-        return float(np.finfo(dtype).eps) * size / spread
-    return float("inf") if size > 0 else 0.0
+    return float(np.finfo(dtype).eps) * size / spread if spread > 0 else float("inf")
 
 
 def energy_figures(E: np.ndarray, E_data: np.ndarray, ts: np.ndarray, lengths: np.ndarray,
@@ -70,18 +68,21 @@ def energy_figures(E: np.ndarray, E_data: np.ndarray, ts: np.ndarray, lengths: n
     reasons = {"energy_relative_drift": no_steps, "energy_drift_over_data_spread": no_steps,
                "energy_change_along_data_over_spread": "the learned E is not finite at the data"}
     if rounding > ENERGY_ROUNDING_LIMIT:
-        size = float(np.nanmax(np.abs(data)))
+        finite = np.abs(data[np.isfinite(data)])
+        size = float(finite.max()) if finite.size else 0.0
+        spread = float(np.ptp(data[np.isfinite(data)])) if finite.size else 0.0
         why = (f"the learned E is constant over the data to {np.dtype(dtype).name} rounding "
                f"(it spans {spread:.2g} at values up to {size:.2g}, rounded to "
                f"{float(np.finfo(dtype).eps) * size:.2g}): how far it moves cannot be measured")
         reasons = dict.fromkeys(reasons, why)
         figures = dict.fromkeys(figures)
     # The float rounding of E's values in units of its spread over the data (about 1e-7 in
-    # float32 for a trained E): above ENERGY_ROUNDING_LIMIT the figures above are null.
+    # float32 for a trained E; inf for a constant E): above ENERGY_ROUNDING_LIMIT the figures
+    # above are null.
     figures["energy_rounding_over_data_spread"] = rounding
     reasons["energy_rounding_over_data_spread"] = (
         "the learned E is not finite at the data" if np.isnan(rounding)
-        else "the learned E is the same number at every state of the data")
+        else "the learned E is the same number at every state of the data")  # inf
     for key, value in figures.items():
         if value is None or not np.isfinite(value):
             null_reasons[key] = reasons[key]

@@ -57,18 +57,36 @@ def entropy_rise_ratio(S: np.ndarray, S_data: np.ndarray, lengths: np.ndarray,
     key = "entropy_rise_over_data_rise"
     data = np.concatenate([S_data[k, :T] for k, T in enumerate(lengths)])
     spread = float(np.nanmax(data) - np.nanmin(data)) if np.isfinite(data).any() else 0.0
-    pairs = [(float(S[k, T - 1] - S[k, 0]), float(S_data[k, T - 1] - S_data[k, 0]))
+    rises = [(_rise(S[k], T), _rise(S_data[k], T), _rise_noise(S_data[k], T))
              for k, T in enumerate(lengths) if failed[k] < 0 and T >= 2]
-    pairs = [(a, b) for a, b in pairs if np.isfinite(a) and np.isfinite(b)]
-    along = sum(b for _, b in pairs)
-    if not pairs:
+    rises = [r for r in rises if all(np.isfinite(r))]
+    along = sum(b for _, b, _ in rises)
+    if not rises:
         null_reasons[key] = "no rollout completed two steps with a finite entropy"
-    elif not along > LEAST_DATA_RISE * spread * len(pairs):
+    elif not along > LEAST_DATA_RISE * spread * len(rises):
         null_reasons[key] = (f"the data raise the learned entropy by less than "
                              f"{LEAST_DATA_RISE:g} of its range over their states")
+    elif not along > 3.0 * np.sqrt(sum(n**2 for _, _, n in rises)):
+        null_reasons[key] = "the data's rise of the learned entropy is within the noise on it"
     else:
-        return sum(a for a, _ in pairs) / along
+        return sum(a for a, _, _ in rises) / along
     return None
+
+
+def _rise(S: np.ndarray, T: int) -> float:
+    """The rise of ``S`` over its first ``T`` values: the mean of their last tenth less that of
+    their first (one value each at least), so that noise on single states weighs less."""
+    k = max(1, T // 10)
+    return float(np.mean(S[T - k:T]) - np.mean(S[:k]))
+
+
+def _rise_noise(S: np.ndarray, T: int) -> float:
+    """The standard deviation that noise on the values gives :func:`_rise`, the noise taken
+    from their second differences (0 with fewer than four values)."""
+    if T < 4:
+        return 0.0
+    k = max(1, T // 10)
+    return float(np.std(np.diff(S[:T], 2)) / np.sqrt(6.0) * np.sqrt(2.0 / k))
 
 
 #: An entropy step along a rollout counts as a decrease only where it falls by more than this

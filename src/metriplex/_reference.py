@@ -184,4 +184,8 @@ def _observed_laws(model, held: Trajectories, d: np.ndarray, dtype) -> dict[str,
         "entropy_decreasing_fraction":
             _finite(np.mean(dS[okS] < -np.maximum(0.01 * sS[okS], nS[okS])))
             if np.any(okS) else None,
+        # The noise floor subtracted from |dE| above, in the same units: where it is not far
+        # below the first law's limit, a small figure says nothing (verdict's weigh_misfit).
+        "energy_noise_floor_median":
+            _finite(np.median(nE[okE] / sE[okE])) if np.any(okE) else None,
     }

@@ -46,9 +46,11 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
     if S_data is not None:
         a2.plot(ts, S_data, color="C9", ls=":", lw=1.5, label="learned S along the data")
     if E_true is not None:
-        a1.plot(ts, E_true, color="0.3", ls="--", label="true E along the true trajectory (affine fit)")
+        a1.plot(ts, E_true, color="0.3", ls="--",
+                label="true E along the true trajectory (affine fit)")
     if S_true is not None:
-        a2.plot(ts, S_true, color="0.3", ls="--", label="true S along the true trajectory (affine fit)")
+        a2.plot(ts, S_true, color="0.3", ls="--",
+                label="true S along the true trajectory (affine fit)")
     suffix = "" if failed_at is None else f"\n(the rollout failed at t = {failed_at:.4g})"
     panels = ((a1, "energy E", E, E_data), (a2, "entropy S", S, S_data))
     for (ax, what, v, on_data), spread in zip(panels, spreads or (None, None)):
@@ -73,7 +75,7 @@ def energy_entropy(ts: np.ndarray, E: np.ndarray, S: np.ndarray, *,
                         if spread and c is not None and np.isfinite(c).any())
         if rounded:
             moved = (f"\nconstant over the data to rounding ({energy_rounding:.2g} of its "
-                     "spread there):\nthe model has learned no energy")
+                     "spread there):\nno energy learned, or one whose offset dwarfs its spread")
         ax.set_title(f"{what.split()[0]} along the learned rollout and the data{moved}{suffix}",
                      fontsize=9)
         ax.legend(fontsize=8)

@@ -30,9 +30,8 @@ def against_constant(metrics: dict) -> tuple[str, bool]:
         won, total = _beaten(metrics)
         if 2 * won > total:  # a few trajectories decide the mean (a new-user check: 2 of 6)
             return (f"NO better on average than predicting x(t) = x(0) ({base:.3e}), though "
-                    f"better on {won} of {total} trajectories: the other {total - won} "
-                    f"decide{'s' if total - won == 1 else ''} the mean; judge the model on "
-                    "more trajectories"), True
+                    f"better on {won} of the {total} completed rollouts: the mean is decided "
+                    f"by the other {total - won}; judge the model on more trajectories"), True
         return (f"NO better than predicting x(t) = x(0) ({base:.3e}): the model does not "
                 f"predict these trajectories"), True
     still = metrics.get("constant_prediction_error_standardised_mean")  # None: an old report
@@ -46,7 +45,8 @@ def _beaten(metrics: dict) -> tuple[int, int]:
     errors, still = metrics.get("rollout_error"), metrics.get("constant_prediction_error")
     if not errors or not still or len(errors) != len(still):
         return 0, 0
-    done = [(e, c) for e, c in zip(errors, still) if e is not None and math.isfinite(e)]
+    done = [(e, c) for e, c in zip(errors, still) if e is not None and math.isfinite(e)
+            and c is not None and math.isfinite(c)]
     return sum(e < c for e, c in done), len(done)
 
 

@@ -363,7 +363,10 @@ def training_outcome(run_dir: str | Path) -> dict:
         obj = {}
     converged = obj.get("converged")
     stopped = obj.get("stopped")
-    cut = search_cut_short(run_config(run_dir)) if converged is True else ""
+    try:  # a damaged config.json leaves the history's word (evaluate says so elsewhere)
+        cut = search_cut_short(run_config(run_dir)) if converged is True else ""
+    except MetriplexError:
+        cut = ""
     if cut:  # the kept training converged, but the search for a good one was cut short
         return {"converged": False, "stopped": cut}
     return {"converged": converged if isinstance(converged, bool) else None,
