@@ -22,14 +22,22 @@ _TINY = 1e-300
 ENERGY_ROUNDING_LIMIT = 1e-2
 
 
+def _size_and_spread(values: np.ndarray) -> tuple[float, float] | None:
+    """The largest magnitude and the spread of the finite ``values`` (``None``: none is)."""
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return None
+    return float(np.max(np.abs(finite))), float(np.ptp(finite))
+
+
 def energy_rounding(E_data: np.ndarray, dtype: Any) -> float:
     """The float rounding (``dtype``'s spacing) of the learned energy at its largest value over
     the data ``E_data``, in units of its spread there; inf where E is the same number
     everywhere, 0 included (values that are not finite are ignored)."""
-    finite = E_data[np.isfinite(E_data)]
-    if finite.size == 0:
+    measured = _size_and_spread(E_data)
+    if measured is None:
         return float("nan")
-    size, spread = float(np.max(np.abs(finite))), float(np.ptp(finite))
+    size, spread = measured
     return float(np.finfo(dtype).eps) * size / spread if spread > 0 else float("inf")
 
 
@@ -67,10 +75,8 @@ def energy_figures(E: np.ndarray, E_data: np.ndarray, ts: np.ndarray, lengths: n
     }
     reasons = {"energy_relative_drift": no_steps, "energy_drift_over_data_spread": no_steps,
                "energy_change_along_data_over_spread": "the learned E is not finite at the data"}
-    if rounding > ENERGY_ROUNDING_LIMIT:
-        finite = np.abs(data[np.isfinite(data)])
-        size = float(finite.max()) if finite.size else 0.0
-        spread = float(np.ptp(data[np.isfinite(data)])) if finite.size else 0.0
+    if rounding > ENERGY_ROUNDING_LIMIT:  # finite: so some values are
+        size, spread = _size_and_spread(data)
         why = (f"the learned E is constant over the data to {np.dtype(dtype).name} rounding "
                f"(it spans {spread:.2g} at values up to {size:.2g}, rounded to "
                f"{float(np.finfo(dtype).eps) * size:.2g}): how far it moves cannot be measured")

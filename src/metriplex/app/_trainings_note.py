@@ -35,9 +35,9 @@ def trainings_note(header: dict) -> str:
 def search_cut_short(header: dict) -> str:
     """Why the run's trainings are no finished search, from its ``config.json`` (``header``):
     where none was judged good and the time budget ended the last before it converged while
-    an earlier one is kept; else ``""``. The verdict then
-    reads training as not converged: a new-user check's gantry crane, exactly GENERIC, was
-    "NOT consistent" at a residual ratio of 2.1 with its kept training 2 of 3 at 0.078."""
+    an earlier one is kept; else ``""``. The verdict then reads training as not converged: a
+    new-user check's gantry crane, exactly GENERIC, was "NOT consistent" at a residual ratio
+    of 2.1 with its kept training 2 of 3 at 0.078."""
     trainings = header.get("trainings") or []
     kept = header.get("kept_training", 0)
     good = (header.get("decided") or {}).get("good_score") or GOOD_SCORE
