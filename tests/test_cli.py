@@ -67,7 +67,7 @@ def test_run_folder_contents(oscillator_run):
     assert cfg["config"]["reversible_first"] is None and cfg["config"]["patience"] is None
     assert cfg["config"]["float64"] is None
     assert cfg["decided"] == {"confine": True, "reversible_first": True, "hold_energy": False,
-                              "w_temperature": 1.0,
+                              "w_temperature": 1.0, "temperature_init": True,
                               "starts": 1, "residual_metric": "correlated", "jacobi": "none",
                               "exact_poisson_degeneracy": False,
                               "exact_friction_degeneracy": True, "entropy_of": None,

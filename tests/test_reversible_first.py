@@ -19,6 +19,7 @@ from metriplex.app.config import (
     hold_energy_on,
     preset,
     reversible_first_on,
+    temperature_init_on,
     temperature_weight,
     validate,
 )
@@ -40,7 +41,10 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
     assert "reversible first" not in capsys.readouterr().err
     first = dataclasses.replace(config, reversible_first=True, w_temperature=1.0)
     _, warm, _, _, _ = train_run(data, first, tmp_path / "warm", progress=False)
-    assert "reversible first: L grad E alone" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "reversible first: L grad E alone" in err
+    # the energy balance's temperature is of order one in the networks' units here: not set
+    assert "temperatures from the energy balance" not in err
     # The main training's first evaluation already has an energy that drives the motion.
     assert warm.valid["total"][0] < 0.5 * cold.valid["total"][0]
     assert "temperature" in warm.train and "temperature" not in cold.train
@@ -53,6 +57,9 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
     (dict(reversible_first=True, poisson="zero"), "got --friction neural --poisson zero"),
     (dict(w_temperature=-1.0, entropy="sum:2"), r"--w-temperature \(a loss weight\) must be >= 0"),
     (dict(hold_energy=True, reversible_first=False), "--hold-energy .* needs that stage"),
+    (dict(temperature_init=True), "--temperature-init .*got --entropy neural --energy neural"),
+    (dict(temperature_init=True, entropy="sum:2", reversible_first=False),
+     "--temperature-init .* without the first stage"),
 ])
 def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     with pytest.raises(MetriplexError, match=match):
@@ -72,6 +79,8 @@ def test_by_default_reversible_first_the_hinge_and_exact_m_go_together(structure
     assert reversible_first_on(config) is on
     hinge = on and config.entropy.startswith("sum:")
     assert temperature_weight(config) == (1.0 if hinge else 0.0)
+    # temperatures read where the hinge holds them and a given L fixes E up to a constant
+    assert temperature_init_on(config) is (hinge and config.poisson != "neural")
     assert exact_blocks(config)[1] is (on and config.friction == "neural")
     # Said explicitly, each wins over the default.
     off = dataclasses.replace(config, reversible_first=False, w_temperature=0.0)

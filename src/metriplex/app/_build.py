@@ -32,6 +32,7 @@ from .config import (
     confine_on,
     exact_blocks,
     scheme_from_name,
+    temperature_init_on,
     temperature_weight,
     validate,
 )
@@ -102,6 +103,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
         quadratic=bool(config.quadratic),
         confinement=(Confinement.around(x, confine_margin(config)) if confine_on(config)
                      else None),
+        linear=temperature_init_on(config) and feats["energy"] is None,
         argument=option(config.energy).argument))
     poisson, entropy, friction = given
     if entropy is None:

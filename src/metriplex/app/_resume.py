@@ -12,7 +12,7 @@ from ._build import jacobi_of, residual_metric_of
 from ._selection import format_ids
 from ._stages import starts_for
 from .config import (RunConfig, confine_on, exact_blocks, hold_energy_on, reversible_first_on,
-                     temperature_weight)
+                     temperature_init_on, temperature_weight)
 
 if TYPE_CHECKING:
     from ..data import Trajectories
@@ -26,6 +26,7 @@ RESUME_MAY_CHANGE = ("max_minutes",)
 #: resumes with the option left out.
 DECIDED = {"confine": confine_on, "reversible_first": reversible_first_on,
            "hold_energy": hold_energy_on, "w_temperature": temperature_weight,
+           "temperature_init": temperature_init_on,
            "starts": starts_for, "residual_metric": residual_metric_of, "jacobi": jacobi_of}
 
 

@@ -32,7 +32,8 @@ class Learn(NamedTuple):
     """What a learned block is made from: ``n`` variables, the network's ``net`` settings
     (width, depth, activation), the training states ``x``, the block's own scales
     (``output_scale`` of a potential, ``scaling`` of L or M), whether its degeneracy is
-    ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, its
+    ``exact``, the ``features`` it sees, a ``quadratic`` term, a ``confinement`` wall, a
+    ``linear`` term (the energy's, for temperatures read from the data), its
     PRNG ``key``, the option's ``argument`` (the text after the colon, e.g. ``10`` of
     ``local:10``) and the ``entropy_variables`` of a given sum (a Lie–Poisson L is not linear
     in them)."""
@@ -47,6 +48,7 @@ class Learn(NamedTuple):
     features: FeatureMap | None = None
     quadratic: bool = False
     confinement: Confinement | None = None
+    linear: bool = False
     argument: str = ""
     entropy_variables: tuple[int, ...] = ()
 
@@ -126,7 +128,8 @@ def _three(argument: str, n: int) -> None:
 
 def _potential(b: Learn) -> MLPPotential:
     return MLPPotential(b.n, features=b.features, data=b.x, output_scale=b.output_scale,
-                        quadratic=b.quadratic, confinement=b.confinement, key=b.key, **b.net)
+                        quadratic=b.quadratic, confinement=b.confinement, linear=b.linear,
+                        key=b.key, **b.net)
 
 
 def _from_file(cls, path: str, key: str, n: int):

@@ -12,7 +12,7 @@ import numpy as np
 from .._errors import MetriplexError
 from ..structure.confinement import MARGIN
 from ._option import entropy_variables as _sum_indices, option
-from ._spellings import FRICTION
+from ._spellings import FRICTION, POISSON
 
 if TYPE_CHECKING:
     from ..structure import AbstractPoisson, AbstractPotential
@@ -22,10 +22,12 @@ class ThermalFields(Protocol):
     """The fields of :class:`~metriplex.app.config.RunConfig` that these options read (a
     protocol, so that this module does not import the configuration that imports it)."""
 
+    energy: str
     entropy: str
     poisson: str
     friction: str
     reversible_first: bool | None
+    temperature_init: bool | None
     hold_energy: bool | None
     w_temperature: float | None
     degeneracy: str
@@ -58,6 +60,21 @@ def hold_energy_on(config: ThermalFields) -> bool:
     return bool(config.hold_energy)
 
 
+def temperature_init_on(config: ThermalFields) -> bool:
+    """Whether the main stage may start with the learned E's temperatures dE/ds_i read from
+    the data's energy balance (``--temperature-init``; :func:`metriplex._balance.
+    balance_temperatures`, set where they are far beyond what the network reaches by itself:
+    ``_stages.SLOPE_FLOOR``). Left out: wherever training starts with L grad E alone beside a
+    **given** L, named entropy variables and the default energy network. Only a given L fixes
+    the first stage's E up to a constant: a learned one trades a gauge with it (L = a J,
+    E -> phi(E)), and the zoo's learned-L cases read negative temperatures."""
+    if config.temperature_init is not None:
+        return config.temperature_init
+    return (reversible_first_on(config) and option(config.entropy).kind == "sum"
+            and option(config.energy).kind == "neural"
+            and not POISSON[option(config.poisson).kind].learned)
+
+
 def temperature_weight(config: ThermalFields) -> float:
     """The weight of the hinge on negative learned temperatures (``--w-temperature``); left
     out: 1 where the entropy variables are named and training starts with L grad E alone
@@ -82,6 +99,16 @@ def check_thermal_options(config: ThermalFields) -> None:
             f"it needs a learned friction (--friction {' or '.join(LEARNED_FRICTIONS)}) and an L "
             f"other than zero; got --friction "
             f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
+    if config.temperature_init and not (reversible_first_on(config)
+                                        and option(config.entropy).kind == "sum"
+                                        and option(config.energy).kind == "neural"):
+        raise MetriplexError(
+            "--temperature-init reads the temperatures dE/ds_i from the energy of the first "
+            "stage (L grad E alone), so it needs that stage, the entropy variables (--entropy "
+            f"sum:I,J,...) and the default energy network; got --entropy {config.entropy} "
+            f"--energy {config.energy}"
+            + ("" if reversible_first_on(config) else " without the first stage")
+            + ". Leave --temperature-init out.")
     if config.hold_energy and not reversible_first_on(config):
         raise MetriplexError(
             "--hold-energy trains the friction to the energy of the first stage (L grad E "

@@ -46,6 +46,7 @@ from ._thermal import (  # noqa: F401 (re-exported)
     exact_blocks,
     hold_energy_on,
     reversible_first_on,
+    temperature_init_on,
     temperature_weight,
 )
 
@@ -117,6 +118,7 @@ class RunConfig:
     average_steps: int = 500
     w_temperature: float | None = None
     reversible_first: bool | None = None
+    temperature_init: bool | None = None
     hold_energy: bool | None = None
     starts: int | None = None
     repeats: int | None = None

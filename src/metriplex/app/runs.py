@@ -194,6 +194,10 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                 "run's settings are unknown. Start a new run (--overwrite) instead of --resume."
             )
         was = RunConfig.from_json(stored)
+        if "temperature_init" not in stored:  # a run made before the option resumes without
+            was = dataclasses.replace(was, temperature_init=False)
+            config = dataclasses.replace(config, temperature_init=config.temperature_init
+                                         or False)
         was = dataclasses.replace(was, scheme=trained_scheme(saved),
                                   float64=_precision(was, parts.train, saved)[0])
         config = dataclasses.replace(config, scheme=config.scheme or was.scheme,

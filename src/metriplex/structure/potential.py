@@ -94,10 +94,14 @@ class MLPPotential(AbstractPotential):
     ~1e-2) are learned equally well. ``output_scale`` :math:`\sigma` multiplies the network:
     :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
     (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
-    ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that is zero
-    on a box a little wider than the training data and quartic outside it, so that the
-    level sets of the
-    potential are bounded: :math:`E = \sigma(\tilde E + W)`.
+    ``linear`` adds a fixed linear term :math:`a^\top z` in the standardised inputs, zero
+    until it is set and never trained (the gradient stops at it, so a zero term changes no
+    step of a training): a slope that the network alone would have to grow from order one (a
+    temperature :math:`\partial E/\partial s` far larger than the gradients that drive the
+    motion), which training sets from the data (README, *Friction that carries the
+    motion*). ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that
+    is zero on a box a little wider than the training data and quartic outside it, so that
+    the level sets of the potential are bounded: :math:`E = \sigma(\tilde E + W)`.
 
     ```python
     E = MLPPotential(10, width=64, depth=2, key=jr.key(0))
@@ -114,6 +118,7 @@ class MLPPotential(AbstractPotential):
     output_scale: float = eqx.field(static=True)
     quadratic: jax.Array | None
     confinement: Confinement | None
+    linear: jax.Array | None
 
     def __init__(
         self, n: int, *,
@@ -125,6 +130,7 @@ class MLPPotential(AbstractPotential):
         output_scale: float = 1.0,
         quadratic: bool = False,
         confinement: Confinement | None = None,
+        linear: bool = False,
         key: jax.Array,
     ) -> None:
         import jax.random as jr
@@ -156,11 +162,14 @@ class MLPPotential(AbstractPotential):
         self.quadratic = (jr.normal(qkey, (in_size, in_size)) / np.sqrt(in_size)
                           if quadratic else None)
         self.confinement = confinement
+        self.linear = jnp.zeros(in_size) if linear else None
 
     def __call__(self, x: State) -> Scalar:
         z = x if self.features is None else self.features(x)
         z = standardise(z, self.shift, self.scale)
         y = self.out(self.hidden(z))
+        if self.linear is not None:
+            y = y + z @ jax.lax.stop_gradient(self.linear.astype(z.dtype))
         if self.quadratic is not None:
             W = self.quadratic.astype(z.dtype)
             y = y + 0.25 * (z @ (W + W.T) @ z)
@@ -177,6 +186,7 @@ class MLPPotential(AbstractPotential):
             output_scale=self.output_scale,
             quadratic=self.quadratic is not None,
             confinement=None if self.confinement is None else self.confinement.to_json(),
+            **({"linear": True} if self.linear is not None else {}),
         )
 
     @classmethod
@@ -196,6 +206,7 @@ class MLPPotential(AbstractPotential):
             output_scale=spec.get("output_scale", 1.0),
             quadratic=spec.get("quadratic", False),
             confinement=None if wall is None else Confinement.from_json(wall),
+            linear=spec.get("linear", False),
             key=key,
         )
 
