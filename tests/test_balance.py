@@ -130,9 +130,33 @@ def test_where_no_temperature_is_set_the_training_is_the_one_without_the_option(
     config = RunConfig(poisson="canonical:1", entropy="sum:2", steps=20, eval_every=10,
                        average_steps=0, validation=0.25, repeats=1, starts=1)
     histories = []
-    for option in (None, False):  # on by default here, its slope below the floor
+    for option in (True, False):  # on (as by default here), its slope below the floor
         run = train_run(data, dataclasses.replace(config, temperature_init=option),
                         tmp_path / str(option), progress=False)
         histories.append(run[1])
     assert histories[0].valid["total"] == histories[1].valid["total"]
     assert histories[0].train["total"] == histories[1].train["total"]
+
+
+def test_with_two_entropy_variables_both_temperatures_are_read_and_none_is_negative():
+    energy = mx.MLPPotential(4, width=8, depth=2, linear=True, key=jr.key(0))
+    weight = energy.hidden.layers[0].weight
+    energy = eqx.tree_at(lambda e: e.hidden.layers[0].weight, energy,
+                         weight.at[:, 2:].set(0.0))  # E of (q, p) only
+    rng = np.random.default_rng(2)
+    qp = np.cumsum(0.1 * rng.normal(size=(80, 2)), axis=0)
+    e = np.asarray(jax.vmap(energy)(jnp.column_stack([qp, np.zeros((80, 2))])))
+    share = rng.uniform(0.2, 0.8, size=79)  # how the lost energy splits between the two
+    lost = -np.diff(e)
+    for t1, t2, expect in ((300.0, 40.0, (300.0, 40.0)), (300.0, -40.0, None)):
+        s1 = np.concatenate([[0.0], np.cumsum(share * lost / t1)])
+        s2 = np.concatenate([[1.0], 1.0 + np.cumsum((1 - share) * lost / t2)])
+        data = mx.Trajectories(np.zeros(80, np.int64), 0.1 * np.arange(80.0),
+                               np.column_stack([qp, s1, s2]))
+        t = balance_temperatures(energy, data, [2, 3])
+        if expect is not None:
+            np.testing.assert_allclose(t, expect, rtol=1e-7)
+        else:  # a negative one is zero, and the other fitted again without it
+            assert t[1] == 0.0 and t[0] > 0.0
+            refit = -np.dot(np.diff(e), np.diff(s1)) / np.dot(np.diff(s1), np.diff(s1))
+            assert t[0] == pytest.approx(refit, rel=1e-7)

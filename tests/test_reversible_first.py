@@ -57,13 +57,22 @@ def test_reversible_first_starts_the_main_training_from_a_trained_energy(tmp_pat
     (dict(reversible_first=True, poisson="zero"), "got --friction neural --poisson zero"),
     (dict(w_temperature=-1.0, entropy="sum:2"), r"--w-temperature \(a loss weight\) must be >= 0"),
     (dict(hold_energy=True, reversible_first=False), "--hold-energy .* needs that stage"),
-    (dict(temperature_init=True), "--temperature-init .*got --entropy neural --energy neural"),
+    (dict(temperature_init=True), "--temperature-init .*--entropy neural --energy neural"),
     (dict(temperature_init=True, entropy="sum:2", reversible_first=False),
      "--temperature-init .* without the first stage"),
+    # a learned L trades a gauge with E: no balance to read
+    (dict(temperature_init=True, entropy="sum:2"), "--temperature-init .*got --poisson neural"),
 ])
 def test_the_thermal_options_refuse_what_they_cannot_do(changes, match):
     with pytest.raises(MetriplexError, match=match):
         validate(dataclasses.replace(RunConfig(), **changes), 3)
+
+
+def test_temperatures_are_not_read_for_an_energy_that_reads_features():
+    config = RunConfig(poisson="canonical:4", entropy="sum:8,9", features="pendulum")
+    assert reversible_first_on(config) and not temperature_init_on(config)
+    with pytest.raises(MetriplexError, match="--temperature-init .*--features pendulum"):
+        validate(dataclasses.replace(config, temperature_init=True), 10)
 
 
 @pytest.mark.parametrize("structure,on", [

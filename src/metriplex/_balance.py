@@ -20,6 +20,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from scipy.optimize import nnls
 
 from ._errors import MetriplexError
 
@@ -36,9 +37,9 @@ def balance_temperatures(energy: "MLPPotential", data: "Trajectories",
     r"""The temperatures :math:`T_i` (one per entropy variable ``indices``, in the data's
     units) that keep :math:`E + \sum_i T_i s_i` most nearly constant along ``data``: the least
     squares solution of :math:`\Delta E_n + \sum_i T_i\Delta s_{i,n} = 0` over the pairs of
-    consecutive samples of each trajectory. Zero where the entropies do not move, and never
-    negative (a negative temperature is no start for training; the hinge on negative
-    temperatures would undo it)."""
+    consecutive samples of each trajectory, with every :math:`T_i \ge 0` (a negative
+    temperature is no start for training; the hinge on negative temperatures would undo it).
+    Zero where the entropies do not move."""
     idx = list(indices)
     dtype = energy.out.weight.dtype
     values = np.concatenate([
@@ -50,8 +51,12 @@ def balance_temperatures(energy: "MLPPotential", data: "Trajectories",
     ok = np.all(np.isfinite(rise), axis=1) & np.isfinite(change)
     if not np.any(ok) or not np.any(rise[ok]):
         return np.zeros(len(idx))
-    temperatures, *_ = np.linalg.lstsq(rise[ok], -change[ok], rcond=None)
-    return np.where(np.isfinite(temperatures), np.maximum(temperatures, 0.0), 0.0)
+    # non-negative least squares, on columns scaled to one (entropies of very different sizes)
+    size = np.sqrt(np.mean(rise[ok] ** 2, axis=0))
+    size = np.where(size > 0, size, 1.0)
+    scaled, _ = nnls(rise[ok] / size, -change[ok])
+    temperatures = scaled / size
+    return np.where(np.isfinite(temperatures), temperatures, 0.0)
 
 
 def with_temperatures(energy: "MLPPotential", indices: Sequence[int],

@@ -26,6 +26,8 @@ class ThermalFields(Protocol):
     entropy: str
     poisson: str
     friction: str
+    features: str
+    features_for: str
     reversible_first: bool | None
     temperature_init: bool | None
     hold_energy: bool | None
@@ -64,15 +66,24 @@ def temperature_init_on(config: ThermalFields) -> bool:
     """Whether the main stage may start with the learned E's temperatures dE/ds_i read from
     the data's energy balance (``--temperature-init``; :func:`metriplex._balance.
     balance_temperatures`, set where they are far beyond what the network reaches by itself:
-    ``_stages.SLOPE_FLOOR``). Left out: wherever training starts with L grad E alone beside a
-    **given** L, named entropy variables and the default energy network. Only a given L fixes
-    the first stage's E up to a constant: a learned one trades a gauge with it (L = a J,
-    E -> phi(E)), and the zoo's learned-L cases read negative temperatures."""
+    ``_stages.SLOPE_FLOOR``). Left out: wherever the balance can be read
+    (:func:`_balance_readable`)."""
     if config.temperature_init is not None:
         return config.temperature_init
+    return _balance_readable(config)
+
+
+def _balance_readable(config: ThermalFields) -> bool:
+    """Whether training starts with L grad E alone beside a **given** L, named entropy
+    variables and the default energy network that reads the state itself (no features). A
+    given L fixes the first stage's E up to a function of the entropy variables (its
+    Casimirs), whose slope the balance reads; a learned L trades a further gauge with it
+    (L = a J, E -> phi(E)), and the zoo's learned-L cases read negative temperatures."""
+    features = {b.strip() for b in config.features_for.split(",")}
     return (reversible_first_on(config) and option(config.entropy).kind == "sum"
             and option(config.energy).kind == "neural"
-            and not POISSON[option(config.poisson).kind].learned)
+            and not POISSON[option(config.poisson).kind].learned
+            and (config.features == "none" or "energy" not in features))
 
 
 def temperature_weight(config: ThermalFields) -> float:
@@ -99,14 +110,14 @@ def check_thermal_options(config: ThermalFields) -> None:
             f"it needs a learned friction (--friction {' or '.join(LEARNED_FRICTIONS)}) and an L "
             f"other than zero; got --friction "
             f"{config.friction} --poisson {config.poisson}. Leave --reversible-first out.")
-    if config.temperature_init and not (reversible_first_on(config)
-                                        and option(config.entropy).kind == "sum"
-                                        and option(config.energy).kind == "neural"):
+    if config.temperature_init and not _balance_readable(config):
         raise MetriplexError(
             "--temperature-init reads the temperatures dE/ds_i from the energy of the first "
-            "stage (L grad E alone), so it needs that stage, the entropy variables (--entropy "
-            f"sum:I,J,...) and the default energy network; got --entropy {config.entropy} "
-            f"--energy {config.energy}"
+            "stage (L grad E alone), so it needs that stage beside a given L (--poisson "
+            "canonical:K or file:...), the entropy variables (--entropy sum:I,J,...) and the "
+            f"default energy network reading the state; got --poisson {config.poisson} "
+            f"--entropy {config.entropy} --energy {config.energy} --features "
+            f"{config.features}"
             + ("" if reversible_first_on(config) else " without the first stage")
             + ". Leave --temperature-init out.")
     if config.hold_energy and not reversible_first_on(config):

@@ -77,9 +77,10 @@ def add_training_options(p: argparse.ArgumentParser) -> None:
                    "friction, so that friction does not carry the motion (see the README; "
                    "default: on when M is learned and neither L nor S is zero)")
     w.add_argument("--temperature-init", action=argparse.BooleanOptionalAction, default=None,
-                   help="after the first stage, set the learned temperatures dE/ds_i from the "
-                   "data's energy balance (default: on where training starts with L grad E "
-                   "alone beside --entropy sum:... and the default energy network)")
+                   help="after the first stage, start from the temperatures dE/ds_i of the "
+                   "data's energy balance where they exceed 100 in the networks' units "
+                   "(default: on beside a given L, --entropy sum:... and the default energy "
+                   "network without features)")
     w.add_argument("--hold-energy", action=argparse.BooleanOptionalAction, default=None,
                    help="after the first stage, train the friction to its energy held, then "
                    "everything: needs --reversible-first (off by default; see the README)")

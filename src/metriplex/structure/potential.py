@@ -95,8 +95,8 @@ class MLPPotential(AbstractPotential):
     :math:`E = \sigma\tilde E`, so that a network of order one has the potential's natural size
     (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
     ``linear`` adds a fixed linear term :math:`a^\top z` in the standardised inputs, zero
-    until it is set and never trained (the gradient stops at it, so a zero term changes no
-    step of a training): a slope that the network alone would have to grow from order one (a
+    until it is set and not trained (the gradient stops at it, so a zero term changes no step
+    of a training; only ``--weight-decay``, off by default, shrinks a set one): a slope that the network alone would have to grow from order one (a
     temperature :math:`\partial E/\partial s` far larger than the gradients that drive the
     motion), which training sets from the data (README, *Friction that carries the
     motion*). ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that
