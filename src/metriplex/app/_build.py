@@ -103,7 +103,7 @@ def build_model(config: RunConfig, data: Trajectories, *, key: jax.Array,
         quadratic=bool(config.quadratic),
         confinement=(Confinement.around(x, confine_margin(config)) if confine_on(config)
                      else None),
-        linear=temperature_init_on(config) and feats["energy"] is None,
+        linear=temperature_init_on(config),
         argument=option(config.energy).argument))
     poisson, entropy, friction = given
     if entropy is None:

@@ -23,7 +23,6 @@ from .._units import Units
 from ..data import Trajectories
 from ..losses import Loss
 from ..structure import Known
-from ..structure.potential import MLPPotential
 from ..train import Checkpoint, fit
 from ._build import Given, build_loss, build_model, fit_settings
 from .config import (LEARNED_POISSON, RunConfig, confine_on, entropy_variables, hold_energy_on,
@@ -185,8 +184,7 @@ def reversible_first(model: GenericModel, config: RunConfig, train: Trajectories
                                  max_seconds=left_of(max_seconds, began))
     print(f"reversible first: L grad E alone, {stopped}", file=sys.stderr)
     model = eqx.tree_at(lambda m: m.energy, model, fitted.energy)
-    if temperature_init_on(config) and isinstance(model.energy, MLPPotential) \
-            and model.energy.features is None:
+    if temperature_init_on(config):  # a network energy reading the state (checked)
         model = _balanced(model, entropy_variables(config), train)
     if config.poisson in LEARNED_POISSON:
         model = eqx.tree_at(lambda m: m.poisson, model, fitted.poisson)

@@ -96,12 +96,13 @@ class MLPPotential(AbstractPotential):
     (e.g. when it pairs with a given Poisson bivector; see :class:`metriplex.Units`).
     ``linear`` adds a fixed linear term :math:`a^\top z` in the standardised inputs, zero
     until it is set and not trained (the gradient stops at it, so a zero term changes no step
-    of a training; only ``--weight-decay``, off by default, shrinks a set one): a slope that the network alone would have to grow from order one (a
-    temperature :math:`\partial E/\partial s` far larger than the gradients that drive the
-    motion), which training sets from the data (README, *Friction that carries the
-    motion*). ``confinement`` (a :class:`~metriplex.structure.Confinement`) adds a wall that
-    is zero on a box a little wider than the training data and quartic outside it, so that
-    the level sets of the potential are bounded: :math:`E = \sigma(\tilde E + W)`.
+    of a training; only ``--weight-decay``, off by default, shrinks a set one): a slope that
+    the network alone would have to grow from order one (a temperature :math:`\partial
+    E/\partial s` far larger than the gradients that drive the motion), which training sets
+    from the data (README, *Friction that carries the motion*). ``confinement`` (a
+    :class:`~metriplex.structure.Confinement`) adds a wall that is zero on a box a little
+    wider than the training data and quartic outside it, so that the level sets of the
+    potential are bounded: :math:`E = \sigma(\tilde E + W)`.
 
     ```python
     E = MLPPotential(10, width=64, depth=2, key=jr.key(0))
