@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import metriplex as mx
+from metriplex.verdict import verdict
 
 
 def _recording_model(seen: list):
@@ -45,5 +46,20 @@ def test_fit_traces_in_full_precision():
                             mx.ZeroPotential(), mx.KnownPoisson(poisson), mx.ZeroFriction(2))
     mx.fit(model, data, steps=2, eval_every=1, validation=None, stopping=None, average=None,
            rollout_check=None, progress=False, key=jax.random.key(1))
+    assert seen and set(seen) == {"highest"}, seen
+    assert jax.config.jax_default_matmul_precision is None
+
+
+def test_the_verdict_traces_in_full_precision():
+    # It scores the model's residuals itself, outside evaluate and the structure checks.
+    seen: list = []
+    model = _recording_model(seen)
+    ts = jnp.asarray(np.arange(12) * 0.1)
+    x0 = jnp.asarray([[1.0, 0.0], [0.5, 0.5], [0.0, 0.8], [0.3, -0.6]])
+    xs = np.asarray(mx.solve(model, x0, ts).xs)
+    data = mx.Trajectories(np.repeat(np.arange(4), 12), np.tile(np.asarray(ts), 4),
+                           xs.reshape(-1, 2), ("q", "p"))
+    seen.clear()
+    verdict(model, data, steps=2, width=4, depth=1, batch_size=8, validation=0.25)
     assert seen and set(seen) == {"highest"}, seen
     assert jax.config.jax_default_matmul_precision is None

@@ -406,3 +406,28 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     assert run([dict(done, score=0.112), dict(cut, score=0.05)], 1)["converged"] is True
     (tmp_path / "config.json").write_text("{damaged")  # as before: the history's word
     assert training_outcome(tmp_path)["converged"] is True
+
+
+def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(
+        tmp_path, monkeypatch, capsys):
+    from metriplex.app import _resume
+
+    # A new-user check resumed a training that its time budget had cut: it was told "kept as
+    # it was", trained on to convergence, and recorded 134 s for a training of 735 s.
+    _repeats.checkpoint_path(tmp_path, 0).write_bytes(b"")
+    (tmp_path / "config.json").write_text(json.dumps({"trainings": [{"seconds": 601.0}]}))
+    _, _, outcomes, _ = _repeats.train_repeats(
+        lambda r, resumed: (f"model {r}", _history(0.01)), repeats=2, out=tmp_path,
+        resume=True, budget=None, began=0.0, keep=lambda m, h: None,
+        earlier=_resume.earlier_seconds(tmp_path))
+    assert 601.0 <= outcomes[0].seconds < 700.0
+    stops = {"time budget reached (518.599 s) at step 43700": "from its checkpoint at step 43 "
+             "700, where it had stopped (time budget reached",
+             "converged at step 100 (no improvement)": "had ended at step 43 700 (converged at "
+             "step 100 (no improvement)); kept as it was",
+             "interrupted at step 43700": "from its checkpoint at step 43 700"}
+    for stopped, said in stops.items():
+        monkeypatch.setattr(_resume, "_checkpoint_meta",
+                            lambda path: {"done": 43700, "history": {"stopped": stopped}})
+        line = _resume.resuming_line(tmp_path / "checkpoint.ckpt", "training 1")
+        assert said in line and ("kept" in line) == stopped.startswith("converged"), line

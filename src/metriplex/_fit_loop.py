@@ -25,6 +25,10 @@ from ._train import History, TrainState, make_lbfgs_chunk, spread
 from ._progress import CAPPED_BAR, TIMED_BAR, progress_bar
 from ._validate import rollout_score
 
+#: How ``History.stopped`` begins where the stopping rule ended a training: a resumed one is
+#: kept as it was (one that a budget of steps or time cut goes on, where the budget allows).
+ENDED = ("early stop", "converged")
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -273,9 +277,8 @@ class FitLoop:
                                 **formats)
         with CtrlC() as ctrl_c:
             try:
-                finished = resume and (
-                    state.done >= self.steps
-                    or history.stopped.startswith(("early stop", "converged")))
+                finished = resume and (state.done >= self.steps
+                                       or history.stopped.startswith(ENDED))
                 if resume and not finished and history.step and history.step[-1] == state.done:
                     # The restored history holds the evaluation at its step, unless Ctrl-C
                     # came between a chunk and its evaluation: then the loop makes it first.

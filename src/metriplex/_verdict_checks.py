@@ -12,7 +12,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from ._precision import in_full_precision
 from ._reference import _finite
 
 CONSISTENT = "consistent"
@@ -383,7 +382,6 @@ _ENTROPY_AND_FRICTION = ("degeneracy_L_gradS", "degeneracy_M_gradE", "entropy_pr
                          "temperatures")
 
 
-@in_full_precision
 def _said(r: dict[str, Any]) -> str:
     """One check of the verdict in words: ``name = value <= limit (note)``, the comparison
     on the side the value lies (a limit is a maximum or, as for held_out_pairs, a minimum);

@@ -186,6 +186,7 @@ import numpy as np
 
 from ._errors import MetriplexError
 from ._model import GenericModel, float_dtype, weights
+from ._precision import in_full_precision
 # The black-box reference and the held-out measurements (BlackBoxModel, ... public from here).
 from ._reference import (BlackBoxModel, Reference, _finite, _observed_laws, _residuals,
                          _serial_correlation, train_reference)
@@ -247,6 +248,7 @@ class Thresholds:
     given_entropy: float = 0.1
 
 
+@in_full_precision
 def verdict(
     model: GenericModel,
     data: Trajectories,
@@ -341,7 +343,6 @@ def verdict(
     observed = _observed_laws(model, held, d, dtype)  # the data's laws, no fitted field
     reasons = weigh_misfit(reasons, observed)
     reasons.append(_given_entropy_check(observed, th.given_entropy, given=not entropy_free))
-    # -- the outcome --
     failed = [r for r in reasons if r["passed"] is False]
     outcome = _outcome(failed, ratio, converged, _far_beyond(rel_gen, rel_box, th))
     excess = None
@@ -351,8 +352,7 @@ def verdict(
     laws = _violations(observed, excess, given=not entropy_free) \
         if outcome == NOT_CONSISTENT else []
 
-    # A fit by L grad E alone says so wherever it is not refuted (a new-user check's piston,
-    # "cannot tell: not converged", with no word that it identified no dissipation).
+    # A fit by L grad E alone says so wherever it is not refuted (a new-user check's piston).
     reversible = "" if not _reversible_only(sr, entropy_free) else " " + (
         CONSERVATIVE if isinstance(model.friction, ZeroFriction) else REVERSIBLE_ONLY)
     if outcome == CONSISTENT:

@@ -16,7 +16,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import jax
 import jax.random as jr
@@ -279,11 +279,12 @@ class Outcome:
                 "score": self.score if math.isfinite(self.score) else None}
 
 
-def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, repeats: int,
-                  out: Path, resume: bool, budget: float | None, began: float,
-                  keep: Callable[[GenericModel, History], None],
-                  change: Callable[[int], str] = lambda r: "", good: float = GOOD_SCORE,
-                  ) -> tuple[GenericModel, History, list[Outcome], int]:
+def train_repeats(
+    one: Callable[[int, bool], tuple[GenericModel, History]], *, repeats: int, out: Path,
+    resume: bool, budget: float | None, began: float,
+    keep: Callable[[GenericModel, History], None], change: Callable[[int], str] = lambda r: "",
+    good: float = GOOD_SCORE, earlier: Sequence[float] = (),
+) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
     while the best so far is not :meth:`Outcome.good` (at ``good``, :func:`good_score`), the
@@ -294,7 +295,9 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
     saves each new best before the next training, so that an interruption never loses it. A
     training that diverges counts as a failed one; where all diverge, the last error is
     raised. ``change(r)``: how training ``r``'s settings differ from the run's, as flags
-    (:meth:`Training.change_of`), said when it starts and kept in its outcome."""
+    (:meth:`Training.change_of`), said when it starts and kept in its outcome. ``earlier``: the
+    seconds each training had taken in the run that this one resumes, which a resumed training's
+    outcome counts with its own (a resumed run recorded 134 s for a training of 735 s)."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []
@@ -304,12 +307,13 @@ def train_repeats(one: Callable[[int, bool], tuple[GenericModel, History]], *, r
             break
         if r:
             print(_again_line(r, repeats, best, change(r), good), file=sys.stderr)
-        start = time.perf_counter()
+        resumed = resume and left_checkpoint(out, r)
+        start = time.perf_counter() - (earlier[r] if resumed and r < len(earlier) else 0.0)
         try:
             # Each bar of the training says which one it is (a run of four took 21 minutes).
             with progress_label(f"training {r + 1} of at most {repeats}") if repeats > 1 \
                     else contextlib.nullcontext():
-                model, history = one(r, resume and left_checkpoint(out, r))
+                model, history = one(r, resumed)
         except TrainingDiverged as e:
             diverged = e
             outcomes.append(Outcome(math.inf, 0, 0, str(e), time.perf_counter() - start,

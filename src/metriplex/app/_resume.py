@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._errors import MetriplexError
+from .._fit_loop import ENDED
 from ._build import jacobi_of, residual_metric_of
 from ._selection import format_ids
 from ._stages import starts_for
@@ -106,6 +107,19 @@ def spent_seconds(out: Path) -> float:
     return seconds if seconds > 0 else 0.0
 
 
+def earlier_seconds(out: Path) -> list[float]:
+    """Each training's seconds as the interrupted run in ``out`` recorded them
+    (``config.json``'s ``trainings``), to which a resumed training adds its own; ``[]`` where
+    unknown (a run killed before it wrote them)."""
+    import json
+
+    try:
+        trainings = json.loads((out / "config.json").read_text()).get("trainings") or []
+        return [float(t.get("seconds") or 0.0) for t in trainings]
+    except (OSError, ValueError, TypeError, AttributeError):
+        return []
+
+
 def _checkpoint_meta(path: Path) -> dict:
     """A checkpoint's header (its step ``done`` and ``history``), ``{}`` where it cannot be
     read."""
@@ -130,10 +144,15 @@ def checkpoint_seconds(path: Path) -> float:
 
 def resuming_line(path: Path, what: str) -> str:
     """What ``metriplex train --resume`` says as it goes on with ``what`` (e.g. "training 1")
-    from the checkpoint at ``path``: the step it goes on from, or that it had ended."""
+    from the checkpoint at ``path``: that it had ended (its stopping rule or its steps ended
+    it, and :func:`~metriplex.fit` keeps it), else the step it goes on from and what had
+    stopped it (a time budget: a larger ``--max-minutes`` trains on; it said "kept as it was"
+    and went on, in a new-user check)."""
     meta = _checkpoint_meta(path)
     done, stopped = meta.get("done"), str((meta.get("history") or {}).get("stopped", ""))
     at = f" at step {done:,}".replace(",", " ") if isinstance(done, int) else ""
-    if stopped and not stopped.startswith("interrupted"):
+    if stopped.startswith((*ENDED, "step budget")):
         return f"resuming: {what} had ended{at} ({stopped}); kept as it was"
+    if stopped and not stopped.startswith("interrupted"):
+        return f"resuming {what} from its checkpoint{at}, where it had stopped ({stopped})"
     return f"resuming {what} from its checkpoint{at}"

@@ -33,7 +33,8 @@ from ._report import report_figures
 from ._trainings_note import search_cut_short
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
-from ._resume import check_resume, decisions, resume_differences, spent_seconds
+from ._resume import (check_resume, decisions, earlier_seconds, resume_differences,
+                      spent_seconds)
 from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, pair_spacing
 from .._rounding import needs_float64
@@ -239,6 +240,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     budget = None if config.max_minutes is None else 60.0 * config.max_minutes
     # --max-minutes caps the whole run: a resumed one counts what the interrupted one spent.
     began = time.perf_counter() - (spent_seconds(out) if resume else 0.0)
+    earlier = earlier_seconds(out) if resume else []  # before config.json is written again
     header_config, config = config.to_json(), dataclasses.replace(config, scheme=scheme)
     loss = build_loss(config, units, train)
     stopping = stopping_for(config)
@@ -282,7 +284,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     try:
         model, history, outcomes, chosen = train_repeats(
             one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
-            keep=keep, change=one.change_of, good=good)
+            keep=keep, change=one.change_of, good=good, earlier=earlier)
     except TrainingDiverged as e:
         keep(e.model, e.history)
         raise
