@@ -328,11 +328,11 @@ def test_registry_and_errors():
     with pytest.raises(mx.MetriplexError, match="unknown pendulum parameter set 'big'"):
         get_system("pendulum-energetic", parameter_set="big")
     with pytest.raises(mx.MetriplexError, match="strictly inside"):
-        get_system("gas-containers", x0_halfwidth="1.5,1,1,1")
+        get_system("gas-containers", x0_halfwidth=(1.5, 1, 1, 1))
 
 
 def test_parameters():
-    rb = get_system("rigid-body", inertia="1, 2, 3", radius="0.5")
+    rb = get_system("rigid-body", inertia=(1, 2, 3), radius=0.5)
     assert rb.config.inertia == (1.0, 2.0, 3.0) and rb.config.radius == 0.5
     assert "inertia=(1, 2, 3)" in rb.parameter_summary()
     spnn = get_system("pendulum-temperature", parameter_set="spnn", kappa=100.0)

@@ -230,3 +230,16 @@ def test_chain_size_is_a_parameter():
     x = jnp.asarray(s.sample_initial(4, seed=0))
     f = np.asarray(batched(s.model.vector_field)(x))
     np.testing.assert_allclose(f, _chain(s.config, np.asarray(x)), rtol=1e-12, atol=1e-14)
+
+
+def test_the_command_line_parses_parameters_and_the_systems_take_typed_values():
+    from metriplex.app._option import system_params
+
+    assert system_params(["masses=1,2", "particles=3", "parameter-set=spnn", "kappa=0.5"]) == {
+        "masses": (1.0, 2.0), "particles": 3, "parameter_set": "spnn", "kappa": 0.5}
+    # Text is parsed once, by the command line: the core takes numbers, not "1,2".
+    with pytest.raises(MetriplexError, match=r"masses' must be 2 comma-separated numbers; got "
+                                             r"'1,2' \(text, not numbers\)"):
+        case("double-pendulum-friction").system.with_params(masses="1,2")
+    with pytest.raises(MetriplexError, match=r"particles' must be an integer; got 2.5"):
+        tc.ThermoelasticChain().with_params(particles=2.5)

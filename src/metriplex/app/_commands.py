@@ -62,6 +62,7 @@ def cmd_generate(args: argparse.Namespace) -> None:
     simulate``, which still works): from ``--trajectories``
     initial states drawn with ``--seed``, ``--steps`` steps of ``--dt`` each, to ``--out``."""
     from .. import systems
+    from ._option import system_params
     from .config import check_seed
     from ..io import write
 
@@ -71,7 +72,7 @@ def cmd_generate(args: argparse.Namespace) -> None:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-    system = systems.get_system(args.system, **_params(args.param))
+    system = systems.get_system(args.system, **system_params(args.param))
     data = systems.generate(
         system, trajectories=args.trajectories, steps=args.steps, dt=args.dt, seed=args.seed
     )
@@ -81,16 +82,6 @@ def cmd_generate(args: argparse.Namespace) -> None:
 
 #: The former name of :func:`cmd_generate` (``metriplex simulate``).
 cmd_simulate = cmd_generate
-
-
-def _params(items):
-    params = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise MetriplexError(f"--param expects NAME=VALUE; got {item!r}.")
-        params[key.replace("-", "_")] = value
-    return params
 
 
 def cmd_train(args: argparse.Namespace) -> int | None:

@@ -216,18 +216,22 @@ def _replace_config(config: Any, params: dict[str, Any], system: str) -> Any:
 
 
 def _coerce(value: Any, hint: Any, key: str, current: Any) -> Any:
-    """Turn ``value`` (possibly a CLI string like ``"10,20,40"``) into the field's type."""
+    """``value`` as the field's type: numbers for a tuple (a sequence, or one number where
+    the field holds one), a float, an int or a name. Strings are parsed by the command line
+    (``--param``), not here."""
     try:
         if typing.get_origin(hint) is tuple:
             if isinstance(value, str):
-                value = [v for v in value.strip("()[] ").split(",") if v.strip()]
-            out = tuple(float(v) for v in value)
+                raise TypeError("text, not numbers")
+            out = tuple(float(v) for v in (value if np.iterable(value) else (value,)))
             if len(out) != len(current):
                 raise ValueError(f"expected {len(current)} numbers")
             return out
         if hint is float:
             return float(value)
         if hint is int:
+            if isinstance(value, float) and not value.is_integer():
+                raise ValueError("not a whole number")
             return int(value)
         if hint is str:
             return str(value)
