@@ -417,12 +417,23 @@ def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(
     _repeats.checkpoint_path(tmp_path, 0).write_bytes(b"")
     (tmp_path / "config.json").write_text(json.dumps({"trainings": [{"seconds": 601.0}]}))
     _, _, outcomes, _ = _repeats.train_repeats(
-        lambda r, resumed: (f"model {r}", _history(0.01)), repeats=2, out=tmp_path,
+        lambda r, resumed: (f"model {r}", _history(0.5)), repeats=2, out=tmp_path,
         resume=True, budget=None, began=0.0, keep=lambda m, h: None,
         earlier=_resume.earlier_seconds(tmp_path))
     assert 601.0 <= outcomes[0].seconds < 700.0
+    assert outcomes[1].seconds < 100.0  # the second left no checkpoint: it started here
+    # A run killed before it recorded them: the checkpoint's own time, where it tells one.
+    monkeypatch.setattr(_repeats, "checkpoint_seconds", lambda path: 500.0)
+    (tmp_path / "config.json").write_text(json.dumps({"config": {}}))
+    _, _, again, _ = _repeats.train_repeats(
+        lambda r, resumed: (f"model {r}", _history(0.01)), repeats=1, out=tmp_path,
+        resume=True, budget=None, began=0.0, keep=lambda m, h: None,
+        earlier=_resume.earlier_seconds(tmp_path))
+    assert 500.0 <= again[0].seconds < 600.0
     stops = {"time budget reached (518.599 s) at step 43700": "from its checkpoint at step 43 "
-             "700, where it had stopped (time budget reached",
+             "700, where it had stopped (time budget reached (518.599 s) at step 43700); it "
+             "trains on where --max-minutes allows more",
+             "step budget reached (43700 steps)": "had ended at step 43 700 (step budget",
              "converged at step 100 (no improvement)": "had ended at step 43 700 (converged at "
              "step 100 (no improvement)); kept as it was",
              "interrupted at step 43700": "from its checkpoint at step 43 700"}
@@ -430,4 +441,5 @@ def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(
         monkeypatch.setattr(_resume, "_checkpoint_meta",
                             lambda path: {"done": 43700, "history": {"stopped": stopped}})
         line = _resume.resuming_line(tmp_path / "checkpoint.ckpt", "training 1")
-        assert said in line and ("kept" in line) == stopped.startswith("converged"), line
+        assert said in line, line
+        assert ("kept" in line) == stopped.startswith(("converged", "step budget")), line

@@ -224,7 +224,7 @@ def test_config_validation(name, params, match):
 
 
 def test_chain_size_is_a_parameter():
-    s = tc.ThermoelasticChain().with_params(particles="3")
+    s = tc.ThermoelasticChain().with_params(particles=3)
     assert s.n == 9 and s.names[:4] == ("q1", "q2", "q3", "p1")
     assert s.model.entropy.indices == (6, 7, 8)
     x = jnp.asarray(s.sample_initial(4, seed=0))
@@ -235,11 +235,19 @@ def test_chain_size_is_a_parameter():
 def test_the_command_line_parses_parameters_and_the_systems_take_typed_values():
     from metriplex.app._option import system_params
 
-    assert system_params(["masses=1,2", "particles=3", "parameter-set=spnn", "kappa=0.5"]) == {
-        "masses": (1.0, 2.0), "particles": 3, "parameter_set": "spnn", "kappa": 0.5}
+    dpf = case("double-pendulum-friction").system
+    assert system_params(["masses=1,2", "gravity=9.5", "nope=01"], dpf.config) == {
+        "masses": (1.0, 2.0), "gravity": 9.5, "nope": "01"}  # an unknown name: as written
+    chain = tc.ThermoelasticChain()
+    assert system_params(["particles=3", "particles=2.5", "particles=x"], chain.config) == {
+        "particles": "x"}  # the last of each name
+    assert system_params(["particles=1e1"], chain.config) == {"particles": 10}
     # Text is parsed once, by the command line: the core takes numbers, not "1,2".
-    with pytest.raises(MetriplexError, match=r"masses' must be 2 comma-separated numbers; got "
-                                             r"'1,2' \(text, not numbers\)"):
-        case("double-pendulum-friction").system.with_params(masses="1,2")
-    with pytest.raises(MetriplexError, match=r"particles' must be an integer; got 2.5"):
-        tc.ThermoelasticChain().with_params(particles=2.5)
+    with pytest.raises(MetriplexError, match=r"masses' must be a sequence of 2 numbers \(--param: "
+                                             r"comma-separated\); got '1,2' \(str, not numbers\)"):
+        dpf.with_params(masses="1,2")
+    for bad, why in ((2.5, "not a whole number"), (np.float32(3.7), "not a whole number"),
+                     (True, "bool, not numbers"), ("3", "str, not numbers")):
+        with pytest.raises(MetriplexError, match=rf"particles' must be an integer; .*\({why}\)"):
+            chain.with_params(particles=bad)
+    assert chain.with_params(particles=np.int64(4)).config.particles == 4

@@ -25,8 +25,9 @@ from ._train import History, TrainState, make_lbfgs_chunk, spread
 from ._progress import CAPPED_BAR, TIMED_BAR, progress_bar
 from ._validate import rollout_score
 
-#: How ``History.stopped`` begins where the stopping rule ended a training: a resumed one is
-#: kept as it was (one that a budget of steps or time cut goes on, where the budget allows).
+#: How ``History.stopped`` begins where the stopping rule ended a training: resumed, it is kept
+#: as it was, as one that reached its steps is; one that its time budget cut trains on, where
+#: the resumed run's budget allows.
 ENDED = ("early stop", "converged")
 
 if TYPE_CHECKING:

@@ -1,8 +1,9 @@
 """The application layer: everything that turns text into objects and results into files.
 
-``config`` (the typed run configuration), ``_option`` (a structure option's kind and argument,
-``--param`` values) and ``_selection`` (trajectory ids): the only modules that parse option
-strings; ``_build`` (a configuration -> model, loss, stopping
+``config`` (the typed run configuration; the option strings are parsed here and in the modules
+it reads: ``_option`` a structure option's kind and argument and ``--param`` values,
+``_spellings`` and ``_thermal`` their arguments, ``_selection`` trajectory ids; nothing outside
+this package parses them), ``_build`` (a configuration -> model, loss, stopping
 rule), ``runs`` and ``_lock`` (run folders and their lock), ``plots`` (figures),
 ``experiments`` (the reference experiments), ``cli`` (the parser and ``main``) and
 ``_commands`` (what each command does).

@@ -72,7 +72,8 @@ def cmd_generate(args: argparse.Namespace) -> None:
         import jax
 
         jax.config.update("jax_enable_x64", True)
-    system = systems.get_system(args.system, **system_params(args.param))
+    params = system_params(args.param, systems.get_system(args.system).config)
+    system = systems.get_system(args.system, **params)
     data = systems.generate(
         system, trajectories=args.trajectories, steps=args.steps, dt=args.dt, seed=args.seed
     )

@@ -7,6 +7,7 @@ Every reader of ``--energy``, ``--entropy``, ``--poisson`` and ``--friction`` go
 
 from __future__ import annotations
 
+import typing
 from typing import Any, NamedTuple
 
 from .._errors import MetriplexError
@@ -34,29 +35,33 @@ def entropy_variables(entropy: str) -> tuple[int, ...]:
     return tuple(int(v) for v in argument.split(",") if v.strip())
 
 
-def system_params(items: list[str] | None) -> dict[str, Any]:
-    """``--param NAME=VALUE`` as keyword arguments: comma-separated numbers as a tuple of
-    floats, a number as an int or a float, anything else as the text (a name; the system
-    checks each against its field and says what it takes)."""
+def system_params(items: list[str] | None, config: Any) -> dict[str, Any]:
+    """``--param NAME=VALUE`` as keyword arguments for a system whose configuration is
+    ``config`` (a dataclass), each value parsed as its field's type: comma-separated numbers
+    for a tuple, a number, a whole number, else the text (a name). Text that is not of its
+    field's type, or names no field, is passed on as written, for the system to refuse with
+    what it takes."""
+    hints = typing.get_type_hints(type(config))
     params = {}
     for item in items or []:
         key, sep, value = item.partition("=")
         if not sep:
             raise MetriplexError(f"--param expects NAME=VALUE; got {item!r}.")
-        params[key.replace("-", "_")] = _param_value(value)
+        key = key.replace("-", "_")
+        params[key] = _param_value(value, hints.get(key))
     return params
 
 
-def _param_value(text: str) -> Any:
-    """One ``--param`` value: see :func:`system_params`."""
-    if "," in text:
-        try:
+def _param_value(text: str, hint: Any) -> Any:
+    """One ``--param`` value as the type ``hint`` (see :func:`system_params`)."""
+    try:
+        if typing.get_origin(hint) is tuple:
             return tuple(float(v) for v in text.strip("()[] ").split(",") if v.strip())
-        except ValueError:
-            return text
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
+        if hint is float:
+            return float(text)
+        if hint is int:  # a fraction is passed on as a number, which the system refuses
+            number = float(text)
+            return int(number) if number.is_integer() else number
+    except ValueError:
+        pass
     return text

@@ -296,8 +296,9 @@ def train_repeats(
     training that diverges counts as a failed one; where all diverge, the last error is
     raised. ``change(r)``: how training ``r``'s settings differ from the run's, as flags
     (:meth:`Training.change_of`), said when it starts and kept in its outcome. ``earlier``: the
-    seconds each training had taken in the run that this one resumes, which a resumed training's
-    outcome counts with its own (a resumed run recorded 134 s for a training of 735 s)."""
+    seconds each training had taken in the run that this one resumes (at least its main stage's,
+    which its checkpoint holds), which a resumed training's outcome counts with its own (a
+    resumed run recorded 134 s for a training of 735 s)."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []
@@ -308,7 +309,9 @@ def train_repeats(
         if r:
             print(_again_line(r, repeats, best, change(r), good), file=sys.stderr)
         resumed = resume and left_checkpoint(out, r)
-        start = time.perf_counter() - (earlier[r] if resumed and r < len(earlier) else 0.0)
+        before = 0.0 if not resumed else max(earlier[r] if r < len(earlier) else 0.0,
+                                              checkpoint_seconds(checkpoint_path(out, r)))
+        start = time.perf_counter() - before
         try:
             # Each bar of the training says which one it is (a run of four took 21 minutes).
             with progress_label(f"training {r + 1} of at most {repeats}") if repeats > 1 \

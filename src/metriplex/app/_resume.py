@@ -110,14 +110,17 @@ def spent_seconds(out: Path) -> float:
 def earlier_seconds(out: Path) -> list[float]:
     """Each training's seconds as the interrupted run in ``out`` recorded them
     (``config.json``'s ``trainings``), to which a resumed training adds its own; ``[]`` where
-    unknown (a run killed before it wrote them)."""
+    unknown (a run killed before it wrote them: the trainings' checkpoints then tell their
+    main stages' time, :func:`checkpoint_seconds`)."""
     import json
+    import math
 
     try:
         trainings = json.loads((out / "config.json").read_text()).get("trainings") or []
-        return [float(t.get("seconds") or 0.0) for t in trainings]
+        seconds = [float(t.get("seconds") or 0.0) for t in trainings]
     except (OSError, ValueError, TypeError, AttributeError):
         return []
+    return [v if math.isfinite(v) and v > 0 else 0.0 for v in seconds]
 
 
 def _checkpoint_meta(path: Path) -> dict:
@@ -154,5 +157,6 @@ def resuming_line(path: Path, what: str) -> str:
     if stopped.startswith((*ENDED, "step budget")):
         return f"resuming: {what} had ended{at} ({stopped}); kept as it was"
     if stopped and not stopped.startswith("interrupted"):
-        return f"resuming {what} from its checkpoint{at}, where it had stopped ({stopped})"
+        return (f"resuming {what} from its checkpoint{at}, where it had stopped ({stopped}); "
+                "it trains on where --max-minutes allows more")
     return f"resuming {what} from its checkpoint{at}"

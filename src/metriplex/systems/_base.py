@@ -89,7 +89,8 @@ class System(abc.ABC):
 
     # -- parameters -----------------------------------------------------------------------------
     def with_params(self, **params: Any) -> "System":
-        """This system with some ``config`` fields replaced (strings are parsed, for the CLI)."""
+        """This system with some ``config`` fields replaced, each given as its type (numbers,
+        not text: the command line parses ``--param``)."""
         return type(self)(_replace_config(self.config, params, self.name))
 
     def parameters(self) -> dict[str, Any]:
@@ -216,13 +217,14 @@ def _replace_config(config: Any, params: dict[str, Any], system: str) -> Any:
 
 
 def _coerce(value: Any, hint: Any, key: str, current: Any) -> Any:
-    """``value`` as the field's type: numbers for a tuple (a sequence, or one number where
-    the field holds one), a float, an int or a name. Strings are parsed by the command line
-    (``--param``), not here."""
+    """``value`` as the field's type: numbers for a tuple (a sequence, or one number where the
+    field holds one), a number, a whole number or a name. Text for numbers is refused: the
+    command line parses ``--param`` (:func:`metriplex.app._option.system_params`), not this."""
     try:
+        if hint in (float, int) or typing.get_origin(hint) is tuple:
+            if isinstance(value, (str, bytes, bool, np.bool_)):
+                raise TypeError(f"{type(value).__name__}, not numbers")
         if typing.get_origin(hint) is tuple:
-            if isinstance(value, str):
-                raise TypeError("text, not numbers")
             out = tuple(float(v) for v in (value if np.iterable(value) else (value,)))
             if len(out) != len(current):
                 raise ValueError(f"expected {len(current)} numbers")
@@ -230,7 +232,7 @@ def _coerce(value: Any, hint: Any, key: str, current: Any) -> Any:
         if hint is float:
             return float(value)
         if hint is int:
-            if isinstance(value, float) and not value.is_integer():
+            if not float(value).is_integer():
                 raise ValueError("not a whole number")
             return int(value)
         if hint is str:
@@ -245,5 +247,5 @@ def _coerce(value: Any, hint: Any, key: str, current: Any) -> Any:
 
 def _describe(hint: Any, current: Any) -> str:
     if typing.get_origin(hint) is tuple:
-        return f"{len(current)} comma-separated numbers"
+        return f"a sequence of {len(current)} numbers (--param: comma-separated)"
     return {float: "a number", int: "an integer", str: "a name"}.get(hint, str(hint))

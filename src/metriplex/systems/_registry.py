@@ -23,8 +23,9 @@ SYSTEMS.update({name: case.system for name, case in ZOO.items()})
 def get_system(name: str, **params: Any) -> System:
     """The built-in system ``name`` with some parameters changed.
 
-    ``params`` are fields of the system's config (strings such as ``"10,20,40"`` are parsed);
-    the pendulums also take ``parameter_set="unit" | "spnn"``.
+    ``params`` are fields of the system's config, each given as its type (``inertia=(10, 20,
+    40)``, not text: ``metriplex generate --param`` parses text); the pendulums also take
+    ``parameter_set="unit" | "spnn"``.
 
     ```python
     rb = get_system("rigid-body", inertia=(1.0, 2.0, 3.0))
