@@ -5,6 +5,7 @@ import dataclasses
 import json
 import math
 
+import numpy as np
 import pytest
 
 import metriplex as mx
@@ -236,7 +237,7 @@ def test_a_run_that_keeps_the_exchange_records_it_and_its_model_has_it(tmp_path,
     # whatever its score: what is checked is the record of a kept exchange (which training
     # the held-out rollouts choose is the test above's), without compiling a training.
     monkeypatch.setattr(_repeats, "fit", lambda model, *a, **k: (model, _history(0.5)))
-    monkeypatch.setattr(_repeats.Outcome, "rank", lambda self: (not self.change, self.score))
+    monkeypatch.setattr(_repeats.Outcome, "rank", lambda self, limit=0.02: (not self.change, self.score))
     data = oscillator_data()
     config = RunConfig(poisson="zero", entropy="sum:2", width=8, steps=200, eval_every=10,
                        patience=1, lr_cuts=0)
@@ -443,3 +444,36 @@ def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(
         line = _resume.resuming_line(tmp_path / "checkpoint.ckpt", "training 1")
         assert said in line, line
         assert ("kept" in line) == stopped.startswith(("converged", "step budget")), line
+
+
+def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, capsys):
+    # Two new-user checks (a reactor, bodies exchanging heat by radiation): with L = 0 and S
+    # given, the learned E shrank and broke M grad E = 0 (0.15, 0.63) while its held-out score
+    # counted as good, so the exchange training, which keeps it by construction, never ran.
+    calls = []
+
+    def one(r, resumed):
+        calls.append(r)
+        return f"model {r}", _history(0.005 + 0.003 * r)
+
+    _, _, outcomes, chosen = _repeats.train_repeats(
+        one, repeats=3, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, degenerate=lambda model, r: r == 1)
+    # The good one is kept, though the other scored lower, and no third training runs.
+    assert calls == [0, 1] and chosen == 1 and [o.degenerate for o in outcomes] == [False, True]
+    assert "leaves M grad E = 0 unmet at the held-out states" in capsys.readouterr().err
+    # train's notes on the trainings speak of their scores: 0.005 was under the limit.
+    header = {"trainings": [o.to_json() for o in outcomes], "kept_training": chosen}
+    assert "none scored under" not in _trainings_note.trainings_note(header)
+    assert _repeats.Outcome.from_json({"score": 0.01}).good()  # a run's record without it
+
+    x = np.random.default_rng(0).normal(size=(40, 2))
+    data = mx.Trajectories(np.repeat(np.arange(4), 10), np.tile(np.arange(10.0), 4), x)
+    friction = mx.ConstantFriction(np.asarray([[1.0, -1.0], [-1.0, 1.0]]))  # keeps x1 + x2
+    config = RunConfig(poisson="zero", entropy="sum:0,1")
+    training = _repeats.Training(config, data, data, *[None] * 11, repeats=3)
+    for weights, kept in (((1.0, 1.0), True), ((1.0, 2.0), False)):
+        energy = mx.Known(lambda s, w=np.asarray(weights): s @ w)
+        model = mx.GenericModel(energy, mx.SumOf((0, 1)), mx.ZeroPoisson(2), friction)
+        assert training.degenerate(model, 0) is kept
+        assert training.degenerate(model, 2) is True  # the exchange: not measured

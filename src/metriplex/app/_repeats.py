@@ -25,7 +25,7 @@ from .._errors import TrainingDiverged
 from .._model import with_dtype
 from .._progress import progress_label
 from .._units import Units
-from ..data import Trajectories, noise_level
+from ..data import Trajectories, noise_level, state_scale
 from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
 from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
@@ -180,6 +180,20 @@ class Training:
         """Training ``r``'s settings (:func:`config_for`)."""
         return config_for(self.config, r, self.repeats)
 
+    def degenerate(self, model: GenericModel, r: int) -> bool:
+        """Whether training ``r``'s ``model`` keeps M grad E = 0 within the verdict's limit at
+        the held-out states, where L = 0 beside the default friction; elsewhere ``True``. With
+        L = 0, E enters the flow only through that condition: an E that breaks it is not the
+        motion's energy, however well the rollouts fit (new-user checks: M grad E 0.15 and 0.63
+        relative, E's gradient 1e-9; the last training's exchange keeps it by construction)."""
+        if self.repeats == 1 or not _friction_alternative(self.config_of(r)):
+            return True
+        from ..diagnostics import structure_residuals
+        from ..verdict import Thresholds
+        x = (self.train if self.valid is None else self.valid).x
+        v = structure_residuals(model, x, scale=state_scale(x))["degeneracy_M_gradE_relative"]
+        return v is not None and math.isfinite(v) and v <= Thresholds().degeneracy
+
     def change_of(self, r: int) -> str:
         """How training ``r``'s settings differ from the run's, as its flags (``""`` if not)."""
         config = self.config_of(r)
@@ -248,6 +262,7 @@ class Outcome:
     converged: bool = False
     diverged: bool = False
     change: str = ""
+    degenerate: bool = True
 
     @classmethod
     def of(cls, history: History, seconds: float) -> Outcome:
@@ -267,12 +282,13 @@ class Outcome:
                       **{k: v for k, v in obj.items() if k in known}})
 
     def good(self, limit: float = GOOD_SCORE) -> bool:
-        """Held-out rollouts within ``limit`` (:func:`good_score`), none failing."""
-        return self.failures == 0 and self.score <= limit
+        """Held-out rollouts within ``limit`` (:func:`good_score`), none failing, and the model
+        ``degenerate`` (:meth:`Training.degenerate`)."""
+        return self.failures == 0 and self.score <= limit and self.degenerate
 
-    def rank(self) -> tuple[int, float]:
-        """Fewer failed held-out rollouts first, then the lower score."""
-        return self.failures, self.score
+    def rank(self, limit: float = GOOD_SCORE) -> tuple[int, bool, float]:
+        """Fewer failed held-out rollouts first, then a good one (:meth:`good`), a lower score."""
+        return self.failures, not self.good(limit), self.score
 
     def to_json(self) -> dict[str, Any]:
         return {**dataclasses.asdict(self),
@@ -284,6 +300,7 @@ def train_repeats(
     resume: bool, budget: float | None, began: float,
     keep: Callable[[GenericModel, History], None], change: Callable[[int], str] = lambda r: "",
     good: float = GOOD_SCORE, earlier: Sequence[float] = (),
+    degenerate: Callable[[GenericModel, int], bool] = lambda model, r: True,
 ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
@@ -298,7 +315,8 @@ def train_repeats(
     (:meth:`Training.change_of`), said when it starts and kept in its outcome. ``earlier``: the
     seconds each training had taken in the run that this one resumes (at least its main stage's,
     which its checkpoint holds), which a resumed training's outcome counts with its own (a
-    resumed run recorded 134 s for a training of 735 s)."""
+    resumed run recorded 134 s for a training of 735 s). ``degenerate(model, r)``: whether
+    training ``r``'s model keeps M grad E = 0 (:meth:`Training.degenerate`); if not, not good."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []
@@ -330,9 +348,9 @@ def train_repeats(
             best[1].stopped = f"interrupted in training {r + 1}"
             break
         outcome = dataclasses.replace(Outcome.of(history, time.perf_counter() - start),
-                                      change=change(r))
+                                      change=change(r), degenerate=degenerate(model, r))
         outcomes.append(outcome)
-        if best is None or outcome.rank() < best[2].rank():
+        if best is None or outcome.rank(good) < best[2].rank(good):
             best, chosen = (model, history, outcome), r
             if r + 1 < repeats:
                 keep(model, history)
@@ -369,6 +387,9 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
         o = best[2]
         why = (f"{o.failures} held-out rollout(s) of the best model so far failed"
                if o.failures else
+               "the best model so far leaves M grad E = 0 unmet at the held-out states (with "
+               "L = 0 nothing else ties its learned E to the motion)"
+               if not o.degenerate and o.score <= good else
                f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
                f"data's spread (good: <= {good:.3g}"
                + (f", {NOISE_FLOOR}x the noise on the held-out states)" if good > GOOD_SCORE

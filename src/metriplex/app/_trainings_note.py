@@ -4,6 +4,8 @@ the start is not what limits them."""
 
 from __future__ import annotations
 
+import dataclasses
+
 from ._repeats import GOOD_SCORE, Outcome
 
 
@@ -52,8 +54,9 @@ def search_cut_short(header: dict) -> str:
 
 
 def _good(outcome: dict, good: float) -> bool:
-    """Whether a training's outcome (``config.json``'s) was judged good at ``good``."""
-    return Outcome.from_json(outcome).good(good)
+    """Whether a training's outcome (``config.json``'s) scored good at ``good`` (its rollouts;
+    one that broke M grad E = 0 also trains again, but these notes speak of the scores)."""
+    return dataclasses.replace(Outcome.from_json(outcome), degenerate=True).good(good)
 
 
 #: Trainings from other initialisations whose held-out scores lie within this factor of each

@@ -284,7 +284,8 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
     try:
         model, history, outcomes, chosen = train_repeats(
             one, repeats=repeats, out=out, resume=resume, budget=budget, began=began,
-            keep=keep, change=one.change_of, good=good, earlier=earlier)
+            keep=keep, change=one.change_of, good=good, earlier=earlier,
+            degenerate=one.degenerate)
     except TrainingDiverged as e:
         keep(e.model, e.history)
         raise
