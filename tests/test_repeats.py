@@ -237,7 +237,8 @@ def test_a_run_that_keeps_the_exchange_records_it_and_its_model_has_it(tmp_path,
     # whatever its score: what is checked is the record of a kept exchange (which training
     # the held-out rollouts choose is the test above's), without compiling a training.
     monkeypatch.setattr(_repeats, "fit", lambda model, *a, **k: (model, _history(0.5)))
-    monkeypatch.setattr(_repeats.Outcome, "rank", lambda self, limit=0.02: (not self.change, self.score))
+    monkeypatch.setattr(_repeats.Outcome, "rank",
+                        lambda self, limit=0.02: (not self.change, self.score))
     data = oscillator_data()
     config = RunConfig(poisson="zero", entropy="sum:2", width=8, steps=200, eval_every=10,
                        patience=1, lr_cuts=0)
