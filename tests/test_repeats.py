@@ -467,6 +467,26 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
     header = {"trainings": [o.to_json() for o in outcomes], "kept_training": chosen}
     assert "none scored under" not in _trainings_note.trainings_note(header)
     assert _repeats.Outcome.from_json({"score": 0.01}).good()  # a run's record without it
+    # Where it is not measured, the outcome says so (None), not that the model keeps it.
+    _, _, outcomes, _ = _repeats.train_repeats(
+        one, repeats=1, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None)
+    assert outcomes[0].degenerate is None and outcomes[0].to_json()["degenerate"] is None
+
+    # Ctrl-C while a finished training is measured: it is ranked (unmeasured) and kept where
+    # best, and the run ends, interrupted, so that train exits as interrupted.
+    def check(model, r):
+        if r == 1:
+            raise KeyboardInterrupt
+        return False
+
+    calls.clear()
+    model, history, outcomes, chosen = _repeats.train_repeats(
+        one, repeats=3, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, degenerate=check)
+    assert calls == [0, 1] and (model, chosen) == ("model 1", 1)
+    assert outcomes[1].degenerate is None
+    assert history.stopped == "interrupted as training 2 ended (converged at step 100)"
 
     x = np.random.default_rng(0).normal(size=(40, 2))
     data = mx.Trajectories(np.repeat(np.arange(4), 10), np.tile(np.arange(10.0), 4), x)
@@ -477,4 +497,4 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
         energy = mx.Known(lambda s, w=np.asarray(weights): s @ w)
         model = mx.GenericModel(energy, mx.SumOf((0, 1)), mx.ZeroPoisson(2), friction)
         assert training.degenerate(model, 0) is kept
-        assert training.degenerate(model, 2) is True  # the exchange: not measured
+        assert training.degenerate(model, 2) is None  # the exchange: not measured

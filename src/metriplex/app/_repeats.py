@@ -30,7 +30,7 @@ from ..losses import Loss
 from ..train import Checkpoint, LBFGSFinish, fit
 from ._build import Given, build_loss, build_model, fit_settings, input_noise_of
 from ._option import option
-from ._resume import checkpoint_seconds, resuming_line
+from ._resume import checkpoint_path, checkpoint_seconds, left_checkpoint, resuming_line
 from ._stages import before_main, left_of
 from .config import RunConfig, reversible_first_on
 
@@ -122,33 +122,6 @@ def repeats_for(config: RunConfig, valid: Trajectories | None) -> int:
     return REPEATS + 1 if _energy_alternative(config) else REPEATS
 
 
-#: The stages before the main training that keep checkpoints of their own (``--reversible-first``
-#: and ``--hold-energy``), by the names of their files.
-STAGES = ("first-stage", "held-stage")
-
-
-def checkpoint_path(out: Path, repeat: int, stage: str = "") -> Path:
-    """Training ``repeat``'s checkpoint (0 based): the first one's is ``checkpoint.ckpt``, as
-    without repeats; the second's ``checkpoint-2.ckpt``, and so on. A ``stage`` of
-    :data:`STAGES` names its own: ``first-stage.ckpt``, ``first-stage-2.ckpt``, ..."""
-    stem = stage or "checkpoint"
-    return out / (f"{stem}.ckpt" if repeat == 0 else f"{stem}-{repeat + 1}.ckpt")
-
-
-def left_checkpoint(out: Path, repeat: int) -> bool:
-    """Whether training ``repeat`` left a checkpoint to resume from, of its main training or
-    of a stage before it."""
-    return any(checkpoint_path(out, repeat, stage).is_file() for stage in ("", *STAGES))
-
-
-def remove_stage_checkpoints(out: Path) -> None:
-    """Remove the stages' checkpoints of a finished run (its trainings' own stay, for
-    ``--resume`` with more steps)."""
-    for path in out.glob("*.ckpt"):
-        if path.name.startswith(STAGES):
-            path.unlink(missing_ok=True)
-
-
 @dataclasses.dataclass(frozen=True)
 class Training:
     """One training of a run, called as ``training(r, resumed)``: training ``r`` (0 based; the
@@ -180,14 +153,15 @@ class Training:
         """Training ``r``'s settings (:func:`config_for`)."""
         return config_for(self.config, r, self.repeats)
 
-    def degenerate(self, model: GenericModel, r: int) -> bool:
+    def degenerate(self, model: GenericModel, r: int) -> bool | None:
         """Whether training ``r``'s ``model`` keeps M grad E = 0 within the verdict's limit at
-        the held-out states, where L = 0 beside the default friction; elsewhere ``True``. With
+        the held-out states, where L = 0 beside the default friction; elsewhere ``None`` (not
+        measured). With
         L = 0, E enters the flow only through that condition: an E that breaks it is not the
         motion's energy, however well the rollouts fit (new-user checks: M grad E 0.15 and 0.63
         relative, E's gradient 1e-9; the last training's exchange keeps it by construction)."""
         if self.repeats == 1 or not _friction_alternative(self.config_of(r)):
-            return True
+            return None
         from ..diagnostics import structure_residuals
         from ..verdict import Thresholds
         x = (self.train if self.valid is None else self.valid).x
@@ -262,7 +236,7 @@ class Outcome:
     converged: bool = False
     diverged: bool = False
     change: str = ""
-    degenerate: bool = True
+    degenerate: bool | None = None
 
     @classmethod
     def of(cls, history: History, seconds: float) -> Outcome:
@@ -283,8 +257,9 @@ class Outcome:
 
     def good(self, limit: float = GOOD_SCORE) -> bool:
         """Held-out rollouts within ``limit`` (:func:`good_score`), none failing, and the model
-        ``degenerate`` (:meth:`Training.degenerate`)."""
-        return self.failures == 0 and self.score <= limit and self.degenerate
+        not found to break M grad E = 0 (``degenerate``: :meth:`Training.degenerate`; ``None``
+        where it was not measured)."""
+        return self.failures == 0 and self.score <= limit and self.degenerate is not False
 
     def rank(self, limit: float = GOOD_SCORE) -> tuple[int, bool, float]:
         """Fewer failed held-out rollouts first, then a good one (:meth:`good`), a lower score."""
@@ -300,7 +275,7 @@ def train_repeats(
     resume: bool, budget: float | None, began: float,
     keep: Callable[[GenericModel, History], None], change: Callable[[int], str] = lambda r: "",
     good: float = GOOD_SCORE, earlier: Sequence[float] = (),
-    degenerate: Callable[[GenericModel, int], bool] = lambda model, r: True,
+    degenerate: Callable[[GenericModel, int], bool | None] = lambda model, r: None,
 ) -> tuple[GenericModel, History, list[Outcome], int]:
     """Up to ``repeats`` trainings ``one(r, resume_r)`` (``r`` from 0; ``resume_r`` where
     ``resume`` and training ``r`` left a checkpoint, of a stage or its own); the next runs only
@@ -316,7 +291,8 @@ def train_repeats(
     seconds each training had taken in the run that this one resumes (at least its main stage's,
     which its checkpoint holds), which a resumed training's outcome counts with its own (a
     resumed run recorded 134 s for a training of 735 s). ``degenerate(model, r)``: whether
-    training ``r``'s model keeps M grad E = 0 (:meth:`Training.degenerate`); if not, not good."""
+    training ``r``'s model keeps M grad E = 0 (:meth:`Training.degenerate`); if not, not good
+    (Ctrl-C while it is measured keeps the finished training, unmeasured, and ends the run)."""
     best: tuple[GenericModel, History, Outcome] | None = None
     chosen = 0
     outcomes: list[Outcome] = []
@@ -347,8 +323,13 @@ def train_repeats(
             # run's; --resume goes on with training r from its stage's checkpoint, if any.
             best[1].stopped = f"interrupted in training {r + 1}"
             break
+        try:
+            degenerate_r = degenerate(model, r)
+        except KeyboardInterrupt:  # the training is done: rank it, unmeasured, and stop
+            degenerate_r = None
+            history.stopped = f"interrupted as training {r + 1} ended ({history.stopped})"
         outcome = dataclasses.replace(Outcome.of(history, time.perf_counter() - start),
-                                      change=change(r), degenerate=degenerate(model, r))
+                                      change=change(r), degenerate=degenerate_r)
         outcomes.append(outcome)
         if best is None or outcome.rank(good) < best[2].rank(good):
             best, chosen = (model, history, outcome), r

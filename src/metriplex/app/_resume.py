@@ -1,6 +1,6 @@
 """What a resumed run must share with the interrupted one (``metriplex train --resume``): its
 options, where those left at None/"auto" are compared by what they decide, its data and its
-split."""
+split; and where each training and stage keeps its checkpoint."""
 
 from __future__ import annotations
 
@@ -160,3 +160,30 @@ def resuming_line(path: Path, what: str) -> str:
         return (f"resuming {what} from its checkpoint{at}, where it had stopped ({stopped}); "
                 "it trains on where --max-minutes allows more")
     return f"resuming {what} from its checkpoint{at}"
+
+
+#: The stages before the main training that keep checkpoints of their own (``--reversible-first``
+#: and ``--hold-energy``), by the names of their files.
+STAGES = ("first-stage", "held-stage")
+
+
+def checkpoint_path(out: Path, repeat: int, stage: str = "") -> Path:
+    """Training ``repeat``'s checkpoint (0 based): the first one's is ``checkpoint.ckpt``, as
+    without repeats; the second's ``checkpoint-2.ckpt``, and so on. A ``stage`` of
+    :data:`STAGES` names its own: ``first-stage.ckpt``, ``first-stage-2.ckpt``, ..."""
+    stem = stage or "checkpoint"
+    return out / (f"{stem}.ckpt" if repeat == 0 else f"{stem}-{repeat + 1}.ckpt")
+
+
+def left_checkpoint(out: Path, repeat: int) -> bool:
+    """Whether training ``repeat`` left a checkpoint to resume from, of its main training or
+    of a stage before it."""
+    return any(checkpoint_path(out, repeat, stage).is_file() for stage in ("", *STAGES))
+
+
+def remove_stage_checkpoints(out: Path) -> None:
+    """Remove the stages' checkpoints of a finished run (its trainings' own stay, for
+    ``--resume`` with more steps)."""
+    for path in out.glob("*.ckpt"):
+        if path.name.startswith(STAGES):
+            path.unlink(missing_ok=True)

@@ -56,7 +56,7 @@ def search_cut_short(header: dict) -> str:
 def _good(outcome: dict, good: float) -> bool:
     """Whether a training's outcome (``config.json``'s) scored good at ``good`` (its rollouts;
     one that broke M grad E = 0 also trains again, but these notes speak of the scores)."""
-    return dataclasses.replace(Outcome.from_json(outcome), degenerate=True).good(good)
+    return dataclasses.replace(Outcome.from_json(outcome), degenerate=None).good(good)
 
 
 #: Trainings from other initialisations whose held-out scores lie within this factor of each

@@ -259,7 +259,7 @@ def _what_is_kept(args: argparse.Namespace) -> str:
         return ""
     from pathlib import Path
 
-    from ._repeats import left_checkpoint
+    from ._resume import left_checkpoint
 
     if left_checkpoint(Path(args.out), 0):
         return f"; continue with the same command and --resume ({args.out} holds a checkpoint)"

@@ -27,14 +27,13 @@ from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
 from ._build import (Given, build_loss, build_model, casimir_variables, constant_variables,
                      stopping_for, units_for)
-from ._repeats import (Training, good_score, left_checkpoint, remove_stage_checkpoints,
-                       repeats_for, train_repeats)
+from ._repeats import Training, good_score, repeats_for, train_repeats
 from ._report import report_figures
 from ._trainings_note import search_cut_short
 from ._data_checks import (FOURTH_ORDER, chosen_scheme, coarse_note, coarse_steps,
                            data_notes, spacing_note)
-from ._resume import (check_resume, decisions, earlier_seconds, resume_differences,
-                      spent_seconds)
+from ._resume import (check_resume, decisions, earlier_seconds, left_checkpoint,
+                      remove_stage_checkpoints, resume_differences, spent_seconds)
 from .config import RunConfig, scheme_from_name, validate
 from ..data import Trajectories, pair_spacing
 from .._rounding import needs_float64
