@@ -326,7 +326,7 @@ def test_the_report_draws_the_learned_temperatures_with_what_the_data_determine(
     import jax
     import jax.numpy as jnp
 
-    from metriplex.app._temperature_plot import temperatures
+    from metriplex.app._temperature_plot import fit_clause, temperatures
     from metriplex.systems import generate, get_system
 
     truth = get_system("heat-exchange").model
@@ -339,6 +339,18 @@ def test_the_report_draws_the_learned_temperatures_with_what_the_data_determine(
     np.testing.assert_allclose(T, true, rtol=1e-12)
     fig = temperatures(s, T, list(names), gauge="ratios")
     assert "only their ratios are determined" in fig.get_suptitle()
+    plt.close(fig)
+    # Where nothing is free, the title says how well the model fits, not that the
+    # temperatures are accurate (new-user checks 26 and 28: rollouts 8 % off, 0.56-1.0 of the
+    # true temperatures, under "as accurate as the fit").
+    errors = np.array([[0.0, 0.1, 0.1], [0.0, 0.2, np.nan], [0.0, 5.0, np.nan]])
+    clause = fit_clause(errors, np.array([-1, -1, 2]))
+    assert clause == " (its rollouts of these data err by 0.11 of their spread, " \
+        "standardised; 1 of 3 failed)", clause
+    assert "no rollout" in fit_clause(errors, np.array([1, 1, 2]))
+    fig = temperatures(s, T, list(names), gauge="determined", fit=clause)
+    title = " ".join(fig.get_suptitle().split())
+    assert "only as well as the model fits them (its rollouts" in title and "{" not in title
     plt.close(fig)
     learned = mx.GenericModel(mx.Known(lambda x: x @ x), mx.Known(lambda x: x[0]),
                               mx.ZeroPoisson(2), mx.ZeroFriction(2))

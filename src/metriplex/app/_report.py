@@ -26,7 +26,7 @@ from .._progress import progress_bar
 from .._model import float_dtype
 from .._structure_check import _terms_at, identified, states_read
 from ..structure import SumOf
-from ._temperature_plot import temperatures
+from ._temperature_plot import fit_clause, temperatures
 
 if TYPE_CHECKING:
     from .._model import GenericModel
@@ -198,7 +198,8 @@ def _draw_report(model, data, folder, sch, k, which, out, xs, lengths, truth: Tr
                 else {"temperature_true_fitted": np.asarray(truth.grad_energy(x))[:, idx]})
         plots.save_figure(temperatures(x[:, idx], gE[:, idx], entropies,
                                        gauge=identified(model)["temperatures"],
-                                       true=true.get("temperature_true_fitted")),
+                                       true=true.get("temperature_true_fitted"),
+                                       fit=fit_clause(errors, failed)),
                           folder / TEMPERATURE_FIGURE, entropy_variables=x[:, idx],
                           temperature=gE[:, idx], names=np.array(entropies), **true)
         bar.update()
