@@ -73,6 +73,22 @@ def test_with_l_zero_a_negative_energy_is_the_same_flow_and_no_violation():
     err = report["rollout_error_standardised_mean"]
     assert f"not the accuracy: the rollouts err by {err:.3g} in standard deviations" in \
         same[1]["statement"]
+    # ... with the median and the worst trajectory: a mean can be one or two trajectories'
+    # (new-user check 27: mean 0.076, median 0.011, two of eight crossing a separatrix).
+    each = report["rollout_error_standardised"]
+    assert len(each) == len(data.ids) and np.isclose(np.mean(each), err)
+    worst = int(np.argmax(each))
+    assert (f"median {np.median(each):.3g}, the worst (trajectory {data.ids[worst]}) "
+            f"{each[worst]:.3g})") in same[1]["statement"]
+    from metriplex._verdict_outcome import _accuracy
+    uneven = _accuracy({"rollout_error_standardised_mean": 0.076, "trajectory_ids": [4, 7, 9],
+                        "rollout_error_standardised": [0.01, 0.5, 0.012]})
+    assert "median 0.012, the worst (trajectory 7) 0.5)" in uneven, uneven
+    # two trajectories, or a failed one (its error inf), or an older report: the mean alone
+    for each in ([0.01, 0.5], [0.01, np.inf, 0.012], None):
+        said = _accuracy({"rollout_error_standardised_mean": 0.076,
+                          "rollout_error_standardised": each})
+        assert said.endswith("(rollout_error_standardised_mean)."), said
     assert same[1]["statement"].endswith("What the data determine: E is given; S is given.")
     # Temperatures of both signs in one state are no choice of E's sign (new-user check 14:
     # "a choice of E's sign, not an error" said of a nine-cell grid where most states had

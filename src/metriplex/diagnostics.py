@@ -269,6 +269,7 @@ def evaluate(
         # In standard deviations about the data's mean: an offset cannot shrink it.
         "rollout_error_standardised_mean": known(float(np.mean(standardised)),
                                                  "rollout_error_standardised_mean", failures),
+        "rollout_error_standardised": [float(e) for e in standardised],  # per trajectory
         "rollout_error_mean_completed": known(
             float(np.mean([e for e in per_traj if np.isfinite(e)])) if completed else None,
             "rollout_error_mean_completed", f"no rollout completed ({failures})"),
