@@ -498,3 +498,16 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
         model = mx.GenericModel(energy, mx.SumOf((0, 1)), mx.ZeroPoisson(2), friction)
         assert training.degenerate(model, 0) is kept
         assert training.degenerate(model, 2) is None  # the exchange: not measured
+
+
+def test_how_a_training_ended_is_read_from_one_place():
+    # Every reader asks _fit_loop.ending, never the prose (it was read by prefix in 15 places).
+    from metriplex._fit_loop import (CONVERGED, DIVERGED, INTERRUPTED, STEP_BUDGET, TIME_BUDGET,
+                                     ending)
+    said = {"converged at step 100 (no improvement in 20 evaluations after 3 learning-rate "
+            "cuts); L-BFGS stopped at iteration 4 (non-finite loss)": CONVERGED,
+            "time budget reached (60 s) at step 300": TIME_BUDGET,
+            "step budget reached (20 steps)": STEP_BUDGET,
+            "interrupted as training 2 ended (converged at step 100)": INTERRUPTED,
+            "diverged at step 5 (non-finite: total)": DIVERGED, "": "", "completed": ""}
+    assert {k: ending(k) for k in said} == said

@@ -25,10 +25,22 @@ from ._train import History, TrainState, make_lbfgs_chunk, spread
 from ._progress import CAPPED_BAR, TIMED_BAR, progress_bar
 from ._validate import rollout_score
 
-#: How ``History.stopped`` begins where the stopping rule ended a training: resumed, it is kept
-#: as it was, as one that reached its steps is; one that its time budget cut trains on, where
-#: the resumed run's budget allows.
-ENDED = ("early stop", "converged")
+#: How a training ended: the words ``History.stopped`` begins with, which :func:`ending` reads
+#: (every reader asks it, never the prose itself).
+CONVERGED, EARLY_STOP, STEP_BUDGET, TIME_BUDGET, INTERRUPTED, DIVERGED = (
+    "converged", "early stop", "step budget", "time budget", "interrupted", "diverged")
+#: The endings of a stopping rule: resumed, such a training is kept as it was, as one that
+#: reached its steps is; one that its time budget cut trains on, where the resumed run's budget
+#: allows.
+ENDED = (EARLY_STOP, CONVERGED)
+
+
+def ending(stopped: str) -> str:
+    """How a training ended, from its ``History.stopped`` (or an outcome's ``stopped``): one of
+    ``CONVERGED``, ``EARLY_STOP``, ``STEP_BUDGET``, ``TIME_BUDGET``, ``INTERRUPTED``,
+    ``DIVERGED``; ``""`` where it had not ended (or the prose is another's)."""
+    return next((e for e in (CONVERGED, EARLY_STOP, STEP_BUDGET, TIME_BUDGET, INTERRUPTED,
+                             DIVERGED) if stopped.startswith(e)), "")
 
 if TYPE_CHECKING:
     import numpy as np
@@ -157,7 +169,7 @@ class FitLoop:
             history.valid.setdefault("total", []).append(va_total)
         if not math.isfinite(tr_total) or not math.isfinite(va_total):
             bad = [k for k, v in {**tr_parts, **va_parts}.items() if not math.isfinite(v)]
-            history.stopped = f"diverged at step {state.done} (non-finite: {', '.join(bad)})"
+            history.stopped = f"{DIVERGED} at step {state.done} (non-finite: {', '.join(bad)})"
             raise TrainingDiverged(
                 f"training diverged at step {state.done}: the loss term(s) {bad or ['total']} "
                 f"became non-finite. The best model so far (step {history.best_step}) is "
@@ -201,21 +213,21 @@ class FitLoop:
         state, history, stopping, patience = self.state, self.history, self.stopping, \
             self.patience
         if state.done >= self.steps:
-            history.stopped = history.stopped or f"step budget reached ({self.steps} steps)"
+            history.stopped = history.stopped or f"{STEP_BUDGET} reached ({self.steps} steps)"
             return True
         if self.max_seconds is not None and history.time[-1] >= self.max_seconds:
-            history.stopped = (f"time budget reached ({self.max_seconds:g} s) at step "
+            history.stopped = (f"{TIME_BUDGET} reached ({self.max_seconds:g} s) at step "
                                f"{state.done}")
             return True
         if stopping is None:
             if patience is not None and state.since_best > patience:
-                history.stopped = (f"early stop at step {state.done} (no improvement in "
+                history.stopped = (f"{EARLY_STOP} at step {state.done} (no improvement in "
                                    f"{patience} evaluations)")
                 history.converged = True
                 return True
         elif state.since_best >= stopping.patience:
             if state.cuts >= stopping.cuts or not self.adjustable:
-                history.stopped = (f"converged at step {state.done} (no improvement in "
+                history.stopped = (f"{CONVERGED} at step {state.done} (no improvement in "
                                    f"{stopping.patience} evaluations after {state.cuts} "
                                    "learning-rate cuts)")
                 history.converged = True
@@ -279,7 +291,7 @@ class FitLoop:
         with CtrlC() as ctrl_c:
             try:
                 finished = resume and (state.done >= self.steps
-                                       or history.stopped.startswith(ENDED))
+                                       or ending(history.stopped) in ENDED)
                 if resume and not finished and history.step and history.step[-1] == state.done:
                     # The restored history holds the evaluation at its step, unless Ctrl-C
                     # came between a chunk and its evaluation: then the loop makes it first.
@@ -295,11 +307,11 @@ class FitLoop:
                         break
                     self.next_chunk()
             except KeyboardInterrupt:
-                history.stopped = f"interrupted at step {state.done}"
+                history.stopped = f"{INTERRUPTED} at step {state.done}"
             finally:
                 self.bar.close()
             if (self.finish is not None and self.finish.steps
-                    and not history.stopped.startswith("interrupted")
+                    and ending(history.stopped) != INTERRUPTED
                     and history.lbfgs_steps == 0):
                 self.lbfgs_finish(ctrl_c)
         self.save_checkpoint()

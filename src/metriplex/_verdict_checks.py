@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from ._fit_loop import TIME_BUDGET, ending
 from ._reference import _finite
 
 CONSISTENT = "consistent"
@@ -121,7 +122,7 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
         conv_note, conv_pass = (f"training did not converge ({how}): the model may still "
                                 "improve; train longer (" + (
             "--resume with a larger --max-minutes: the budget counts the time already trained)"
-            if how.startswith("time budget") else "--steps, or --resume)")), False
+            if ending(how) == TIME_BUDGET else "--steps, or --resume)")), False
     reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
                            conv_note))
     sens = report.get("step_sensitivity", "absent")

@@ -19,7 +19,7 @@ import optax
 
 from ._precision import in_full_precision
 from ._errors import MetriplexError
-from ._fit_loop import Evaluation, FitLoop
+from ._fit_loop import INTERRUPTED, Evaluation, FitLoop, ending
 from ._fit_options import Checkpoint, LBFGSFinish
 from ._model import AbstractModel, float_dtype, with_dtype
 from ._optimizers import (
@@ -223,7 +223,7 @@ def fit(
     resume = checkpoint is not None and checkpoint.resume
     if resume:
         state = state.load(checkpoint.path)
-        if state.history.stopped.startswith("interrupted"):
+        if ending(state.history.stopped) == INTERRUPTED:
             state.history.stopped = ""
         if state.done > steps:
             raise MetriplexError(

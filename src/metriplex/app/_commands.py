@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .._fit_loop import INTERRUPTED, ending
 from .._errors import MetriplexError
 from ..data import noise_level
 from ..verdict import Thresholds
@@ -154,7 +155,7 @@ def cmd_train(args: argparse.Namespace) -> int | None:
                         trainings=trainings_note(saved)))
     for line in structure_warnings(metrics) + cells_hint(metrics, config, target.n):
         print(line, file=sys.stderr)
-    if history.stopped.startswith("interrupted"):
+    if ending(history.stopped) == INTERRUPTED:
         print(
             f"metriplex train: interrupted; the best model so far and a checkpoint are in {out}. "
             "Continue with the same command and --resume.",

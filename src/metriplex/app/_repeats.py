@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 import jax
 import jax.random as jr
 
+from .._fit_loop import INTERRUPTED, TIME_BUDGET, ending
 from .._errors import TrainingDiverged
 from .._model import with_dtype
 from .._progress import progress_label
@@ -321,13 +322,13 @@ def train_repeats(
                 raise
             # Ctrl-C in a stage before training r's main one: the best model so far is the
             # run's; --resume goes on with training r from its stage's checkpoint, if any.
-            best[1].stopped = f"interrupted in training {r + 1}"
+            best[1].stopped = f"{INTERRUPTED} in training {r + 1}"
             break
         try:
             degenerate_r = degenerate(model, r)
         except KeyboardInterrupt:  # the training is done: rank it, unmeasured, and stop
             degenerate_r = None
-            history.stopped = f"interrupted as training {r + 1} ended ({history.stopped})"
+            history.stopped = f"{INTERRUPTED} as training {r + 1} ended ({history.stopped})"
         outcome = dataclasses.replace(Outcome.of(history, time.perf_counter() - start),
                                       change=change(r), degenerate=degenerate_r)
         outcomes.append(outcome)
@@ -335,14 +336,14 @@ def train_repeats(
             best, chosen = (model, history, outcome), r
             if r + 1 < repeats:
                 keep(model, history)
-        if history.stopped.startswith("interrupted"):
+        if ending(history.stopped) == INTERRUPTED:
             if best[1] is not history:  # the run stops here: say so on the kept history
                 best[1].stopped = f"{history.stopped} of training {r + 1}"
             break
     if best is None:
         assert diverged is not None
         raise diverged
-    cut = [i for i, o in enumerate(outcomes) if o.stopped.startswith("time budget")]
+    cut = [i for i, o in enumerate(outcomes) if ending(o.stopped) == TIME_BUDGET]
     if cut and not best[2].good(good):  # said: a Python caller gets no final line
         print(f"repeats: the time budget ended training {cut[-1] + 1} of at most {repeats} "
               f"before it converged; the best so far (training {chosen + 1}) is kept, not "
@@ -353,7 +354,7 @@ def train_repeats(
 
 def _enough(best: tuple[Any, History, Outcome] | None, last: Outcome, budget: float | None,
             began: float, good: float = GOOD_SCORE) -> bool:
-    if best is not None and (best[2].good(good) or best[1].stopped.startswith("interrupted")):
+    if best is not None and (best[2].good(good) or ending(best[1].stopped) == INTERRUPTED):
         return True
     if not (last.converged or last.diverged):
         return True

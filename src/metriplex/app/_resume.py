@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .._errors import MetriplexError
-from .._fit_loop import ENDED
+from .._fit_loop import ENDED, INTERRUPTED, STEP_BUDGET, ending
 from ._build import jacobi_of, residual_metric_of
 from ._selection import format_ids
 from ._stages import starts_for
@@ -154,9 +154,9 @@ def resuming_line(path: Path, what: str) -> str:
     meta = _checkpoint_meta(path)
     done, stopped = meta.get("done"), str((meta.get("history") or {}).get("stopped", ""))
     at = f" at step {done:,}".replace(",", " ") if isinstance(done, int) else ""
-    if stopped.startswith((*ENDED, "step budget")):
+    if ending(stopped) in (*ENDED, STEP_BUDGET):
         return f"resuming: {what} had ended{at} ({stopped}); kept as it was"
-    if stopped and not stopped.startswith("interrupted"):
+    if stopped and ending(stopped) != INTERRUPTED:
         return (f"resuming {what} from its checkpoint{at}, where it had stopped ({stopped}); "
                 "it trains on where --max-minutes allows more")
     return f"resuming {what} from its checkpoint{at}"

@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .._fit_loop import INTERRUPTED, ending
 from .._balance import balance_temperatures, with_temperatures
 from .._errors import TrainingDiverged
 from .._model import GenericModel, with_dtype
@@ -87,7 +88,7 @@ def best_start(build: Callable[[jax.Array], GenericModel], key: jax.Array, *, st
                              progress=False, key=jax.random.fold_in(key, starts + i),
                              **{**fit_args, "steps": steps, "stopping": None, "average": None,
                                 "max_seconds": left_of(fit_args.get("max_seconds"), began)})
-            if history.stopped.startswith("interrupted"):
+            if ending(history.stopped) == INTERRUPTED:
                 raise KeyboardInterrupt
             score = math.inf if math.isnan(history.best_valid) else history.best_valid
         except TrainingDiverged:
@@ -133,7 +134,7 @@ def _stage(start: GenericModel, config: RunConfig, train: Trajectories,
         # The main training starts from the best model before the divergence (or the untrained
         # one) and meets the same settings: it keeps and saves its own best model.
         fitted, stopped = (start if e.model is None else e.model), str(e)
-    if stopped.startswith("interrupted"):
+    if ending(stopped) == INTERRUPTED:
         # Stop the whole training, as Ctrl-C asks (the stage's checkpoint, if any, keeps it).
         raise KeyboardInterrupt
     return fitted, stopped

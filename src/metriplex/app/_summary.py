@@ -8,6 +8,8 @@ import statistics
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from .._fit_loop import INTERRUPTED, TIME_BUDGET, ending
+
 if TYPE_CHECKING:
     from ..train import History
 
@@ -60,7 +62,7 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     once (:func:`~metriplex.app._trainings_note.trainings_note`)."""
     last = history.step[-1] if history.step else 0
     ended = history.stopped or "completed"
-    timed = ended.startswith("time budget")
+    timed = ending(ended) == TIME_BUDGET
     if timed and first_stage:  # the stage's budget is what the earlier ones left of the run's
         ended = ended.replace(" s)", " s: what the stages and trainings before it left of "
                               "--max-minutes)", 1)
@@ -70,7 +72,7 @@ def train_summary(history: History, metrics: dict, seconds: float, out: Path, *,
     more_time = "continue it with --resume and a larger --max-minutes (the whole run counts)"
     if not history.converged and history.best_step == last and last > 0:
         ended += ("; the best model is the last one: not converged, " + (
-            "continue it with --resume" if ended.startswith("interrupted") else more_time
+            "continue it with --resume" if ending(ended) == INTERRUPTED else more_time
             if timed else "allow more --steps"))
     elif timed and not history.converged and last > 0:  # capped, its best model earlier
         ended += f"; not converged: {more_time}"

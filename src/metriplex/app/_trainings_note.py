@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from .._fit_loop import TIME_BUDGET, ending
 from ._repeats import GOOD_SCORE, Outcome
 
 
@@ -44,7 +45,7 @@ def search_cut_short(header: dict) -> str:
     kept = header.get("kept_training", 0)
     good = (header.get("decided") or {}).get("good_score") or GOOD_SCORE
     if (len(trainings) < 2 or kept >= len(trainings) - 1
-            or not str(trainings[-1].get("stopped", "")).startswith("time budget")
+            or ending(str(trainings[-1].get("stopped", ""))) != TIME_BUDGET
             or any(_good(o, good) for o in trainings)):
         return ""
     score = Outcome.from_json(trainings[kept]).score

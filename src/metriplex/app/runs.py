@@ -22,6 +22,7 @@ import jax.random as jr
 import numpy as np
 
 from . import plots
+from .._fit_loop import INTERRUPTED, ending
 from .._errors import MetriplexError, TrainingDiverged
 from ._lock import LOCK_NAME, RunLock, check_not_in_use
 from ._selection import TrajectoryIds, format_ids
@@ -298,7 +299,7 @@ def _train_run(parts: RunData, config, out, *, overwrite, resume, progress):
                                      "kept_training": chosen})
     seconds = time.perf_counter() - began  # every stage and training
     keep(model, history, train_seconds=seconds)
-    if not history.stopped.startswith("interrupted"):
+    if ending(history.stopped) != INTERRUPTED:
         remove_stage_checkpoints(out)
     plots.save_figure(
         plots.loss_curves(history), out / "figures" / "loss",
