@@ -4,6 +4,8 @@ best model so far are poor, and keeping the best."""
 import dataclasses
 import json
 import math
+import pathlib
+import re
 
 import numpy as np
 import pytest
@@ -467,6 +469,8 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
     header = {"trainings": [o.to_json() for o in outcomes], "kept_training": chosen}
     assert "none scored under" not in _trainings_note.trainings_note(header)
     assert _repeats.Outcome.from_json({"score": 0.01}).good()  # a run's record without it
+    unmeasured = _repeats.Outcome.from_json({"score": 0.01, "degenerate": None})
+    assert unmeasured.degenerate is None and unmeasured.good()
     # Where it is not measured, the outcome says so (None), not that the model keeps it.
     _, _, outcomes, _ = _repeats.train_repeats(
         one, repeats=1, out=tmp_path, resume=False, budget=None, began=0.0,
@@ -486,7 +490,21 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
         keep=lambda m, h: None, degenerate=check)
     assert calls == [0, 1] and (model, chosen) == ("model 1", 1)
     assert outcomes[1].degenerate is None
-    assert history.stopped == "interrupted as training 2 ended (converged at step 100)"
+    assert history.stopped == "interrupted after training 2 had ended (converged at step 100)"
+    # ... and where the interrupted one is not the best, the kept one says so, once.
+    calls.clear()
+    model, history, outcomes, chosen = _repeats.train_repeats(
+        lambda r, resumed: (calls.append(r), (f"model {r}", _history(0.05 + 0.3 * r)))[1],
+        repeats=3, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, degenerate=lambda model, r: check(model, r) or None)
+    assert calls == [0, 1] and (model, chosen) == ("model 0", 0)
+    assert history.stopped == "interrupted after training 2 had ended"
+    # A training that Ctrl-C ended is not measured (the check would take a second Ctrl-C).
+    _, _, outcomes, _ = _repeats.train_repeats(
+        lambda r, resumed: (f"model {r}", _history(0.5, stopped="interrupted at step 40")),
+        repeats=3, out=tmp_path, resume=False, budget=None, began=0.0,
+        keep=lambda m, h: None, degenerate=check)
+    assert len(outcomes) == 1 and outcomes[0].degenerate is None
 
     x = np.random.default_rng(0).normal(size=(40, 2))
     data = mx.Trajectories(np.repeat(np.arange(4), 10), np.tile(np.arange(10.0), 4), x)
@@ -498,6 +516,8 @@ def test_where_l_is_zero_a_training_that_breaks_m_grad_e_is_not_good(tmp_path, c
         model = mx.GenericModel(energy, mx.SumOf((0, 1)), mx.ZeroPoisson(2), friction)
         assert training.degenerate(model, 0) is kept
         assert training.degenerate(model, 2) is None  # the exchange: not measured
+        alone = _repeats.Training(config, data, data, *[None] * 11, repeats=1)
+        assert alone.degenerate(model, 0) is None  # one training: nothing to choose
 
 
 def test_how_a_training_ended_is_read_from_one_place():
@@ -511,3 +531,10 @@ def test_how_a_training_ended_is_read_from_one_place():
             "interrupted as training 2 ended (converged at step 100)": INTERRUPTED,
             "diverged at step 5 (non-finite: total)": DIVERGED, "": "", "completed": ""}
     assert {k: ending(k) for k in said} == said
+    src = pathlib.Path(mx.__file__).parent
+    prefix_reads = [f"{path.relative_to(src)}:{i + 1}" for path in sorted(src.rglob("*.py"))
+                    for i, line in enumerate(path.read_text().splitlines())
+                    if re.search(r"stopped\b[^=]*\.startswith\((?!e\))|\.startswith\(\(?\"("
+                                 r"interrupted|converged|early stop|time budget|step budget|"
+                                 r"diverged)", line)]
+    assert not prefix_reads, prefix_reads

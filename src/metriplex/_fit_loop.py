@@ -38,7 +38,9 @@ ENDED = (EARLY_STOP, CONVERGED)
 def ending(stopped: str) -> str:
     """How a training ended, from its ``History.stopped`` (or an outcome's ``stopped``): one of
     ``CONVERGED``, ``EARLY_STOP``, ``STEP_BUDGET``, ``TIME_BUDGET``, ``INTERRUPTED``,
-    ``DIVERGED``; ``""`` where it had not ended (or the prose is another's)."""
+    ``DIVERGED``; ``""`` where it had not ended, or the words are another's (a diverged
+    training's outcome in ``--repeats`` keeps its error's message, "training diverged ...",
+    and its own ``diverged`` flag)."""
     return next((e for e in (CONVERGED, EARLY_STOP, STEP_BUDGET, TIME_BUDGET, INTERRUPTED,
                              DIVERGED) if stopped.startswith(e)), "")
 

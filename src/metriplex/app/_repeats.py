@@ -324,11 +324,13 @@ def train_repeats(
             # run's; --resume goes on with training r from its stage's checkpoint, if any.
             best[1].stopped = f"{INTERRUPTED} in training {r + 1}"
             break
+        after = ""  # Ctrl-C after the training: it is done, so it is ranked, unmeasured
         try:
-            degenerate_r = degenerate(model, r)
-        except KeyboardInterrupt:  # the training is done: rank it, unmeasured, and stop
-            degenerate_r = None
-            history.stopped = f"{INTERRUPTED} as training {r + 1} ended ({history.stopped})"
+            degenerate_r = (None if ending(history.stopped) == INTERRUPTED
+                            else degenerate(model, r))
+        except KeyboardInterrupt:
+            degenerate_r, after = None, f"{INTERRUPTED} after training {r + 1} had ended"
+            history.stopped = f"{after} ({history.stopped})"
         outcome = dataclasses.replace(Outcome.of(history, time.perf_counter() - start),
                                       change=change(r), degenerate=degenerate_r)
         outcomes.append(outcome)
@@ -338,7 +340,7 @@ def train_repeats(
                 keep(model, history)
         if ending(history.stopped) == INTERRUPTED:
             if best[1] is not history:  # the run stops here: say so on the kept history
-                best[1].stopped = f"{history.stopped} of training {r + 1}"
+                best[1].stopped = after or f"{history.stopped} of training {r + 1}"
             break
     if best is None:
         assert diverged is not None
@@ -371,7 +373,7 @@ def _again_line(r: int, repeats: int, best: tuple[Any, History, Outcome] | None,
                if o.failures else
                "the best model so far leaves M grad E = 0 unmet at the held-out states (with "
                "L = 0 nothing else ties its learned E to the motion)"
-               if not o.degenerate and o.score <= good else
+               if o.degenerate is False and o.score <= good else
                f"the held-out rollouts of the best model so far err by {o.score:.3g} of the "
                f"data's spread (good: <= {good:.3g}"
                + (f", {NOISE_FLOOR}x the noise on the held-out states)" if good > GOOD_SCORE

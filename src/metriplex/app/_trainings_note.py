@@ -49,7 +49,7 @@ def search_cut_short(header: dict) -> str:
             or any(_good(o, good) for o in trainings)):
         return ""
     score = Outcome.from_json(trainings[kept]).score
-    return (f"time budget: the search for a good training was cut short, training "
+    return (f"{TIME_BUDGET}: the search for a good training was cut short, training "
             f"{len(trainings)} before it converged, none judged good at <= {good:.3g}; the one "
             f"kept, training {kept + 1}, scored {score:.3g}")
 
