@@ -410,6 +410,18 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     assert run([dict(done, score=0.112), dict(cut, score=0.05)], 1)["converged"] is True
     (tmp_path / "config.json").write_text("{damaged")  # as before: the history's word
     assert training_outcome(tmp_path)["converged"] is True
+    # train's final line says it too (new-user check 29: it read "the kept training:
+    # converged", the cut search on stderr only), and what --resume would run.
+    header = {"trainings": [dict(done, score=0.112), dict(done, score=0.0777), cut],
+              "kept_training": 1, "decided": {"repeats": 4}}
+    note = _trainings_note.trainings_note(header)
+    assert "time budget: the search for a good training was cut short, training 3" in note
+    assert note.endswith("; 1 more of --repeats never ran: --resume with a larger "
+                         "--max-minutes goes on with them"), note
+    assert "none scored under" not in note
+    header["decided"]["repeats"] = 3
+    assert _trainings_note.trainings_note(header).endswith(
+        "scored 0.0777: --resume with a larger --max-minutes goes on with them")
 
 
 def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(

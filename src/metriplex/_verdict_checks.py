@@ -119,9 +119,10 @@ def _soundness_checks(report: dict[str, Any], trajectories: int, converged: bool
         conv_note, conv_pass = f"training converged ({stopped or 'on a plateau'})", True
     else:
         how = stopped or "stopped before a plateau"
-        conv_note, conv_pass = (f"training did not converge ({how}): the model may still "
-                                "improve; train longer (" + (
-            "--resume with a larger --max-minutes: the budget counts the time already trained)"
+        conv_note, conv_pass = (f"training did not converge ({how}): more training may "
+                                "still improve the fit; train longer (" + (
+            "--resume with a larger --max-minutes: the budget counts the time already "
+            "trained; it goes on with the training cut, then any left of --repeats)"
             if ending(how) == TIME_BUDGET else "--steps, or --resume)")), False
     reasons.append(_reason("training_converged", converged, True, conv_pass, CANNOT_TELL,
                            conv_note))

@@ -36,6 +36,20 @@ def _training_checks(data, trained_on, rel_gen: float | None, *, misfit: bool | 
         trained_on, ratio_failed=misfit, th=th)
 
 
+def _converged_where_misfit(reasons: list[dict[str, Any]],
+                           ratio_passed: bool | None) -> list[dict[str, Any]]:
+    """``reasons`` with ``training_converged`` not judged where the residual ratio passed, as
+    the other training checks: a model that fits the data as well as the reference and is
+    GENERIC shows them consistent with GENERIC however its training ended (more training could
+    only fit better), while the misfit of one still improving is no evidence against it. A
+    new-user check's exactly GENERIC oscillator, its kept training judged good (held-out 0.014)
+    and every structure check passing at a residual ratio of 0.072, was "cannot tell" because
+    ``--max-minutes`` had cut it."""
+    return [{**r, "passed": None, "note": f"{r['note']}; {_unjudged(False)}"}
+            if r["name"] == "training_converged" and r["passed"] is False and ratio_passed
+            else r for r in reasons]
+
+
 def _unjudged(ratio_failed: bool | None) -> str:
     """Why a check judged only where the residual ratio failed is not judged: the ratio passed
     (``False``), or was itself not judged (``None``: the reference fits badly; a new-user check

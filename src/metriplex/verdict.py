@@ -48,10 +48,11 @@ name                       limit          meaning
                                           more than predicting x(t) = x(0): it predicts
                                           nothing, and its residuals prove nothing (cannot
                                           tell)
-``training_converged``     true           training stopped on a plateau, not on a step or
-                                          time cap (nor did the cap end the repeats before
-                                          any was judged good): a model still improving
-                                          says little (cannot tell; unknown without a history)
+``training_converged``     true           failed residual ratio: training stopped on a
+                                          plateau, not on a step or time cap (nor did the
+                                          cap end the repeats before any was judged good):
+                                          the misfit of a model still improving is no
+                                          evidence (cannot tell; unknown without a history)
 ``step_sensitivity``       0.1            refining the time step 4x changes more than 10%
                                           of the structured model's predicted motion
                                           (:func:`metriplex.diagnostics.step_sensitivity`):
@@ -197,7 +198,7 @@ from ._verdict_checks import (CANNOT_TELL, CONSISTENT, GIVEN_ENTROPY_FALLS, MISS
                               _said, _soundness_checks, _structure_checks)
 from ._verdict_outcome import _accuracy, _given_entropy_check, _outcome, _violations, weigh_misfit
 from ._verdict_skill import _skill_check
-from ._verdict_training import _training_checks
+from ._verdict_training import _converged_where_misfit, _training_checks
 from .data import Trajectories, state_scale, time_scale
 from .structure import ZeroFriction, ZeroPotential
 
@@ -333,7 +334,7 @@ def verdict(
                                 fraction=reference.validation) + _skill_check(report, th)
     compared, ratio = _residual_checks(rel_gen, rel_box, box_note, th, correlation)
     ratio_passed = next(r["passed"] for r in compared if r["name"] == "residual_ratio")
-    reasons += compared + _training_checks(
+    reasons = _converged_where_misfit(reasons, ratio_passed) + compared + _training_checks(
         data, trained_on, rel_gen, th=th,
         misfit=None if ratio_passed is None else not ratio_passed,
         reference_pairs=len(train.t) - len(train.ids))
@@ -360,8 +361,6 @@ def verdict(
         statement = (f"consistent with GENERIC: {_said(key)}; the fitted model is GENERIC and "
                      f"its rollouts complete (all {sum(r['passed'] is True for r in reasons)} "
                      "applicable checks pass; see verdict.reasons)." + _accuracy(report) + (
-                         "" if converged is not None else " How training ended was not given "
-                         "(history=): a model still improving would be 'cannot tell'.") + (
                          " " + sr["identified"]["statement"][0].upper()
                          + sr["identified"]["statement"][1:]) + reversible)
     elif outcome == NOT_CONSISTENT:

@@ -24,7 +24,13 @@ def trainings_note(header: dict) -> str:
     change = trainings[kept].get("change") if kept < len(trainings) else None
     good = (header.get("decided") or {}).get("good_score") or GOOD_SCORE
     alike = _alike_note(trainings, good)
-    if not alike and not any(_good(o, good) for o in trainings):
+    cut = search_cut_short(header)
+    if cut:  # said on stderr only, the final line read "converged" (new-user check 29)
+        most = (header.get("decided") or {}).get("repeats") or len(trainings)
+        alike = (f"; {cut}" + (f"; {most - len(trainings)} more of --repeats never ran"
+                               if most > len(trainings) else "")
+                 + ": --resume with a larger --max-minutes goes on with them")
+    elif not alike and not any(_good(o, good) for o in trainings):
         # A new-user check's four scores, 0.0343, 0.0212, 0.035, 0.0207, were read as good.
         alike = (f"; none scored under {good:.3g}, the score at which training stops "
                  "repeating: the one kept is the best of them, not judged good")
