@@ -85,7 +85,8 @@ def test_experiment_pipeline_writes_everything(tmp_path, monkeypatch):
     assert len(metrics["time_to_10pct_error"]) == 5
     saved = json.loads((out / "metrics.json").read_text())
     assert saved[key] == pytest.approx(metrics[key])
-    # The verdict, as evaluate gives it (20 training steps: not converged, so not consistent).
+    # The verdict, as evaluate gives it (20 training steps: a misfit, and not converged, which
+    # is weighed where the residual ratio fails: so not consistent).
     assert saved["verdict"]["outcome"] in ("cannot tell", "not consistent")
     assert any(r["name"] == "training_converged" and r["passed"] is False
                for r in saved["verdict"]["reasons"])

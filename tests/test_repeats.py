@@ -397,7 +397,7 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     ended = run([dict(done, score=0.112), dict(done, score=0.0777), cut], 1)
     assert ended["converged"] is False
     assert ended["stopped"].startswith("time budget: the search for a good training was cut "
-                                       "short, training 3 before it converged")
+                                       "short (it ended training 3 before it converged)")
     assert "none judged good at <= 0.02; the one kept, training 2, scored 0.0777" \
         in ended["stopped"]
     reasons = _soundness_checks({"trajectories": 8}, 8, ended["converged"], ended["stopped"],
@@ -415,13 +415,14 @@ def test_a_search_the_time_budget_cut_short_is_no_converged_training_for_the_ver
     header = {"trainings": [dict(done, score=0.112), dict(done, score=0.0777), cut],
               "kept_training": 1, "decided": {"repeats": 4}}
     note = _trainings_note.trainings_note(header)
-    assert "time budget: the search for a good training was cut short, training 3" in note
-    assert note.endswith("; 1 more of --repeats never ran: --resume with a larger "
-                         "--max-minutes goes on with them"), note
+    assert "time budget: the search for a good training was cut short (it ended training 3" \
+        in note
+    assert note.endswith(": --resume with a larger --max-minutes goes on with training 3, then "
+                         "the 1 left of --repeats"), note
     assert "none scored under" not in note
     header["decided"]["repeats"] = 3
     assert _trainings_note.trainings_note(header).endswith(
-        "scored 0.0777: --resume with a larger --max-minutes goes on with them")
+        "scored 0.0777: --resume with a larger --max-minutes goes on with training 3")
 
 
 def test_a_resumed_training_counts_the_seconds_it_had_taken_and_says_it_goes_on(

@@ -5,12 +5,12 @@ Three outcomes, and every one says why, figure by figure:
 - **consistent**: the structured model explains the held-out data about as well as an
   unconstrained model of the same capacity, *and* it is itself GENERIC (degenerate, Jacobi,
   entropy never decreasing along its rollouts), *and* the evidence is sound (every rollout
-  completed, training converged, the reference fits);
+  completed, the reference fits; how training ended does not decide it);
 - **not consistent**: on sound evidence, the structured model leaves much more of the observed
   rates unexplained than the unconstrained reference: the structure, as fitted, cannot
   represent the dynamics;
-- **cannot tell**: the evidence is not sound (a rollout failed, training did not converge, the
-  reference itself fits badly, so that neither the structure nor the data can be blamed), or
+- **cannot tell**: the evidence is not sound (a rollout failed, a misfit's training did not
+  converge, the reference fits badly, so that neither the structure nor the data is blamed), or
   the model fits but is not GENERIC (its fit then proves nothing about GENERIC).
 
 **The residual comparison.** The floor that no model beats (noise, the time step) is measured
@@ -278,7 +278,7 @@ def verdict(
     when not given): its rollout failures and the entropy production along its rollouts are
     weighed. ``converged``/``stopped``: how the model's training ended, or ``history`` (the
     :class:`~metriplex.train.History` that :func:`~metriplex.fit` returned) to read them from;
-    unknown when none is given (a ground-truth model), and a "consistent" then says so.
+    unknown when none is given (a ground-truth model); weighed only where the ratio fails.
     ``reference``: a :func:`train_reference` of ``data`` to reuse; otherwise the black box
     trains here (``width``, ``depth``, ``steps``, ``learning_rate``, ``batch_size``; their
     defaults are those of ``metriplex train``, which ``metriplex evaluate`` passes from the

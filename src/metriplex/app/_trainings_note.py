@@ -26,10 +26,10 @@ def trainings_note(header: dict) -> str:
     alike = _alike_note(trainings, good)
     cut = search_cut_short(header)
     if cut:  # said on stderr only, the final line read "converged" (new-user check 29)
-        most = (header.get("decided") or {}).get("repeats") or len(trainings)
-        alike = (f"; {cut}" + (f"; {most - len(trainings)} more of --repeats never ran"
-                               if most > len(trainings) else "")
-                 + ": --resume with a larger --max-minutes goes on with them")
+        left = ((header.get("decided") or {}).get("repeats") or 0) - len(trainings)
+        alike = (f"; {cut}: --resume with a larger --max-minutes goes on with training "
+                 f"{len(trainings)}" + (f", then the {left} left of --repeats" if left > 0
+                                        else ""))
     elif not alike and not any(_good(o, good) for o in trainings):
         # A new-user check's four scores, 0.0343, 0.0212, 0.035, 0.0207, were read as good.
         alike = (f"; none scored under {good:.3g}, the score at which training stops "
@@ -55,8 +55,8 @@ def search_cut_short(header: dict) -> str:
             or any(_good(o, good) for o in trainings)):
         return ""
     score = Outcome.from_json(trainings[kept]).score
-    return (f"{TIME_BUDGET}: the search for a good training was cut short, training "
-            f"{len(trainings)} before it converged, none judged good at <= {good:.3g}; the one "
+    return (f"{TIME_BUDGET}: the search for a good training was cut short (it ended training "
+            f"{len(trainings)} before it converged), none judged good at <= {good:.3g}; the one "
             f"kept, training {kept + 1}, scored {score:.3g}")
 
 
