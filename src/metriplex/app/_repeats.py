@@ -157,10 +157,10 @@ class Training:
     def degenerate(self, model: GenericModel, r: int) -> bool | None:
         """Whether training ``r``'s ``model`` keeps M grad E = 0 within the verdict's limit at
         the held-out states, where L = 0 beside the default friction; elsewhere ``None`` (not
-        measured). With
-        L = 0, E enters the flow only through that condition: an E that breaks it is not the
-        motion's energy, however well the rollouts fit (new-user checks: M grad E 0.15 and 0.63
-        relative, E's gradient 1e-9; the last training's exchange keeps it by construction)."""
+        measured). With L = 0, E enters the flow only through that condition: an E that breaks
+        it is not the motion's energy, however well the rollouts fit (new-user checks: M grad E
+        0.15 and 0.63 relative, E's gradient 1e-9; the last training's exchange keeps it by
+        construction)."""
         if self.repeats == 1 or not _friction_alternative(self.config_of(r)):
             return None
         from ..diagnostics import structure_residuals
