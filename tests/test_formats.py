@@ -367,6 +367,10 @@ def test_npz_damaged_member(tmp_path):
         ("trajectory,t,q\n0,0,1,5\n", r"more columns than the header: decimal commas"),
         ("trajectory,t,q\nrun0,0,1\n", r"holds 'run0'.*Trajectory ids are integers"),
         ("trajectory,t,q\n0,2024-01-01T12:00:00,1\n", r"Times are numbers in one unit, not dates"),
+        # Python's repr of numbers (new-user check 29: told that times are not dates).
+        ("trajectory,t,q\n0,np.float64(0.0),np.float64(1.5)\n",
+         r"holds 'np\.float64\(0\.0\)'; .*'np\.float64\(0\.0\)' is how Python prints a number "
+         r"object, not the number: write plain numbers"),
         (",trajectory,t,q\n0,0,0,1\n", r"first two columns are '' and 'trajectory'.*index column"),
         # A wide table (a new-user check: told to rename t and q_0 to trajectory and t).
         ("t,q_0,p_0,q_1,p_1\n0,1,0,2,0\n", r"first column is 't' and there is no trajectory "

@@ -140,7 +140,11 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
             if v is None or v != v or v in (float("inf"), float("-inf")):
                 what = "is empty" if not c.strip() else f"holds {c.strip()!r}"
                 fix = "Fix or remove that row (interpolate missing samples)."
-                if v is None and c.strip() and j == 0:
+                if v is None and _repr_of_number(c):
+                    fix = (f"{c.strip()!r} is how Python prints a number object, not the "
+                           "number: write plain numbers (float(v), numpy.savetxt or pandas' "
+                           "to_csv of a numeric table).")
+                elif v is None and c.strip() and j == 0:
                     fix = "Trajectory ids are integers (0, 1, 2, ...): number the trajectories."
                 elif v is None and c.strip() and j == 1:
                     fix = ("Times are numbers in one unit, not dates or clock times: convert "
@@ -159,6 +163,20 @@ def read_csv(path: Path, *, dt: float | None = None) -> Trajectories:
             "not an integer; ids label trajectories 0, 1, 2, ..."
         )
     return build(arr, header)
+
+
+def _repr_of_number(cell: str) -> bool:
+    """Whether ``cell`` is a Python repr of a number, ``np.float64(0.5)`` or
+    ``tensor(1.)`` (a new-user check wrote a CSV of such cells and was told that times are not
+    dates)."""
+    head, _, rest = cell.strip().partition("(")
+    if not head or not rest.endswith(")") or not head.replace(".", "").replace("_", "").isalnum():
+        return False
+    try:
+        float(rest[:-1].split(",")[0])
+    except ValueError:
+        return False
+    return True
 
 
 def _others(problems: list[tuple[int, str, str, str]]) -> str:
